@@ -1,0 +1,33 @@
+# One-command set-up. `make demo` installs and runs the main job; `make test` installs and runs the tests.
+PY ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: install demo test lint bench model clean
+
+$(STAMP): pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	# the local CPU wheel first, so the project's torch range installs nothing more
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e ".[formats,test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/stickslip demo --out stickslip-demo
+
+test: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks scripts
+	$(BIN)/python -m pytest -q -m "not slow"
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/simulate.py
+
+model: $(STAMP)
+	$(BIN)/python scripts/train_default_model.py
+
+clean:
+	rm -rf $(VENV) stickslip-demo

@@ -1,0 +1,57 @@
+"""Entry point: builds the Typer app from the command modules."""
+
+from __future__ import annotations
+
+import typer
+
+from stickslip import __version__
+
+app = typer.Typer(
+    name="stickslip",
+    help=(
+        "Prandtl-Tomlinson parameters (U0, K, mean friction, eta, regime) from atomic-scale "
+        "stick-slip friction traces. Conventions: ../shared/PHYSICS.md, summarised in README."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"stickslip {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version."
+    ),
+) -> None:
+    """stickslip command line."""
+
+
+def _register() -> None:
+    # Each module adds its commands to `app`; imported here so `app` is complete.
+    import importlib
+
+    for mod in ("simulate", "formats", "label", "learn"):
+        try:
+            importlib.import_module(f"stickslip.cli.{mod}")
+        except ModuleNotFoundError as e:
+            if e.name != f"stickslip.cli.{mod}":
+                raise
+
+
+_register()
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()
+
+
+if __name__ == "__main__":
+    main()
