@@ -2,13 +2,13 @@
 
 The project's plain trace format is a CSV file with header ``x_nm,force_nN``: support
 position in nm (from 0 at the first recorded pixel) and lateral force in nN, positive
-while sliding forward. Every command reads traces through :func:`collect_traces`.
+while sliding forward. Every command reads traces through :func:`collect_traces`,
+which also reads vendor friction maps and other layouts (see
+:mod:`stickslip.data.formats` and docs/formats.md).
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -79,8 +79,13 @@ def validate_trace(x_nm: np.ndarray, force_nN: np.ndarray, path: str) -> None:
         raise TraceReadError(path, "x_nm is not strictly increasing")
 
 
-def read_trace_csv(path: str | os.PathLike) -> Trace:
-    """Read a ``x_nm,force_nN`` CSV trace.
+def read_trace_csv(path: str | os.PathLike, calibration_nN_per_V: float | None = None) -> Trace:
+    """Read a single-trace CSV: ``x_nm,force_nN``, or ``x_nm,force_V`` (volts).
+
+    A force column in volts is multiplied by ``calibration_nN_per_V``; without it the
+    trace stays in volts and its meta says ``unit="V"``, ``calibrated=False``.
+    Other layouts (trace/retrace loops) hold several traces: read them with
+    :func:`collect_traces`.
 
     Raises
     ------
@@ -88,32 +93,17 @@ def read_trace_csv(path: str | os.PathLike) -> Trace:
         With a one-line reason if the file is missing, lacks the columns, holds
         non-numeric values or NaNs, has fewer than 16 samples, or x is not increasing.
     """
+    from stickslip.data.formats.text import read_text
+
     p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise TraceReadError(p, "file not found") from None
-    except IsADirectoryError:
-        raise TraceReadError(p, "is a directory") from None
-    except UnicodeDecodeError:
-        raise TraceReadError(p, "not a text file") from None
-    except OSError as e:
-        raise TraceReadError(p, f"cannot read ({e.strerror})") from None
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].lstrip().startswith("#")]
-    if not rows:
-        raise TraceReadError(p, "empty file")
-    header = [h.strip() for h in rows[0]]
-    if "x_nm" not in header or "force_nN" not in header:
-        raise TraceReadError(p, f"needs columns x_nm,force_nN (found {','.join(header)})")
-    ix, iF = header.index("x_nm"), header.index("force_nN")
-    try:
-        data = np.array([[float(r[ix]), float(r[iF])] for r in rows[1:]], dtype=float)
-    except (ValueError, IndexError) as e:
-        raise TraceReadError(p, f"non-numeric or missing value ({e})") from None
-    data = data.reshape(-1, 2)
-    x, f = data[:, 0].copy(), data[:, 1].copy()
-    validate_trace(x, f, str(p))
-    return Trace(x_nm=x, force_nN=f, name=p.stem, source=str(p), meta={"unit": "nN"})
+    if p.is_dir():
+        raise TraceReadError(p, "is a directory")
+    if not p.exists():
+        raise TraceReadError(p, "file not found")
+    traces = read_text(p, calibration_nN_per_V=calibration_nN_per_V)
+    if len(traces) != 1:
+        raise TraceReadError(p, f"holds {len(traces)} traces; read it with collect_traces")
+    return traces[0]
 
 
 def write_trace_csv(path: str | os.PathLike, x_nm: np.ndarray, force_nN: np.ndarray) -> None:
