@@ -398,3 +398,25 @@ def summarise_by_load(rows: Iterable[Mapping[str, Any]], keys: Sequence[str]) ->
             rec[f"{k}_std"] = float(vals.std(ddof=1)) if vals.size > 1 else math.nan
         out.append(rec)
     return out
+
+
+def parse_loads(text: str | None) -> list[float] | None:
+    """Parse a comma-separated list of loads (``"10,8,6"``); ``None`` or empty gives None.
+
+    Raises
+    ------
+    ValueError
+        With a one-line message naming the bad entry.
+    """
+    if not text or not text.strip():
+        return None
+    out = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            raise ValueError(f"bad load '{part.strip()}' (expected numbers like 10,8,6)") from None
+        if not math.isfinite(v):
+            raise ValueError(f"bad load '{part.strip()}' (not finite)")
+        out.append(v)
+    return out
