@@ -230,7 +230,7 @@ def map_to_traces(
     lateral = [c for c in scan.lateral() if c.data is not None]
     if not lateral:
         found = ", ".join(f"{c.name} ({c.direction or '?'})" for c in scan.channels)
-        found = f"found: {found}" if found else "no image channels at all: a force curve or spectroscopy file?"
+        found = f"found: {found}" if found else "no image channels: a force curve or spectrum?"
         raise TraceReadError(path, f"no lateral-force image channels ({found})")
     cal = scan.meta.get("calibration_nN_per_V") or calibration_nN_per_V
     size = scan.scan_size_nm or scan_size_nm
