@@ -121,6 +121,16 @@ def test_project_hdf5(tmp_path):
     assert not errors and len(traces) == 3
     assert traces[2].meta["U0_eV"] == 1.5 and traces[2].meta["lattice_nm"] == 0.246
     np.testing.assert_allclose(traces[1].force_nN, 2 * _ramp())
+    sweep = tmp_path / "sweep.h5"  # the simulated-sweep layout (stickslip.data.dataset)
+    with h5py.File(sweep, "w") as f:
+        f.attrs["format"], f.attrs["config"] = "stickslip-sweep-1", "{}"
+        f["force_nN"] = np.vstack([_ramp(), 2 * _ramp()])
+        f["x_nm"] = np.arange(N) * 11 / N
+        f["support_nm"] = np.zeros((2, N))
+        f["done"] = np.array([True, False])
+        f["params/K_N_m"] = np.array([10.0, 20.0])
+    (t,), errors = collect_traces([sweep])
+    assert not errors and t.meta["K_N_m"] == 10.0 and "config" not in t.meta
     with h5py.File(tmp_path / "empty.h5", "w") as f:
         f["other"] = np.zeros(3)
     _, errors = collect_traces([tmp_path / "empty.h5"])

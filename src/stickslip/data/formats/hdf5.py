@@ -5,10 +5,15 @@ Layout read here (any group, the root included, may hold one set):
 - ``force_nN``: float array ``(n_traces, n_samples)`` or ``(n_samples,)``;
 - ``x_nm``: ``(n_samples,)`` shared by all traces, or the same shape as ``force_nN``;
 - optional ``names``: ``(n_traces,)`` strings;
-- optional further 1-D datasets of length ``n_traces`` (labels such as ``U0_eV``,
-  ``K_N_m``): copied into each trace's ``meta`` under their own names;
-- scalar attributes of the file and of the group (``lattice_nm``,
-  ``velocity_nm_per_s``, ``temperature_K``...) are copied into ``meta``.
+- optional further 1-D datasets of length ``n_traces``, beside ``force_nN`` or in a
+  ``params`` subgroup (labels such as ``U0_eV``, ``K_N_m``, ``lattice_nm``): copied
+  into each trace's ``meta`` under their own names;
+- optional ``done`` ``(n_traces,)`` bool: rows not yet simulated are skipped;
+- scalar attributes of the file and of the group (except the long ``config``) are
+  copied into ``meta``.
+
+This is the layout of the simulated sweeps (:mod:`stickslip.data.dataset`,
+``/force_nN``, ``/x_nm``, ``/params/<name>``, ``/done``), so they read as traces too.
 """
 
 from __future__ import annotations
@@ -22,12 +27,15 @@ from stickslip.data.formats.common import read_bytes
 from stickslip.data.trace import Trace, TraceReadError, validate_trace
 
 H5_MAGIC = b"\x89HDF\r\n\x1a\n"
+_RESERVED = ("force_nN", "x_nm", "names", "done", "support_nm")
 LAYOUT = "needs a force_nN dataset (with x_nm) in the project's HDF5 layout"
 
 
 def _scalars(attrs: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in attrs.items():
+        if k == "config":
+            continue
         v = v.decode() if isinstance(v, bytes) else v
         if isinstance(v, np.generic):
             v = v.item()
@@ -53,14 +61,20 @@ def _group_traces(path: Path, group: Any, file_meta: dict[str, Any]) -> list[Tra
         raw = list(group["names"][()])
         if len(raw) == n:
             names = [r.decode() if isinstance(r, bytes) else str(r) for r in raw]
+    items = list(group.items())
+    if "params" in group and hasattr(group["params"], "items"):
+        items += list(group["params"].items())
     extra = {
-        k: np.asarray(ds[()]) for k, ds in group.items()
-        if k not in ("force_nN", "x_nm", "names") and hasattr(ds, "shape")
-        and ds.shape == (n,) and ds.dtype.kind in "fiub"
+        k: np.asarray(ds[()]) for k, ds in items
+        if k not in _RESERVED and hasattr(ds, "shape") and ds.shape == (n,)
+        and ds.dtype.kind in "fiub"
     }
+    done = np.asarray(group["done"][()], dtype=bool) if "done" in group else np.ones(n, bool)
+    if done.shape != (n,):
+        raise TraceReadError(path, f"group {group.name}: done does not match force_nN")
     meta0 = dict(file_meta, **_scalars(group.attrs), file=str(path), unit="nN", calibrated=True)
     out = []
-    for i in range(n):
+    for i in np.flatnonzero(done).tolist():
         xi, fi = np.array(xs[i], dtype=float), np.array(force[i], dtype=float)
         validate_trace(xi, fi, str(path))
         meta = dict(meta0, index=i, **{k: v[i].item() for k, v in extra.items()})
