@@ -63,20 +63,32 @@ def k_from_segment(k_seg: float, F_lo: float, F_hi: float, Fmax: float, a: float
 
 
 @njit(cache=True)
-def _saddle(th: float, eta: float, th_c: float) -> float:
-    """Saddle phase ahead of the minimum at ``th`` (NaN if there is none)."""
+def _saddle(th: float, eta: float, th_c: float, guess: float) -> float:
+    """Saddle phase ahead of the minimum at ``th`` (NaN if there is none).
+
+    Safeguarded Newton on ``h = sin th_b - sin th + (th_b - th)/eta``, which decreases
+    on ``[th_c, 2 pi - th_c]``; ``guess`` is the previous grid point's saddle.
+    """
     lo = th_c
     hi = 2.0 * np.pi - th_c
     s = np.sin(th)
-    if np.sin(hi) - s + (hi - th) / eta > 0:  # h decreases on [th_c, 2 pi - th_c]
+    if np.sin(hi) - s + (hi - th) / eta > 0:
         return np.nan
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        if np.sin(mid) - s + (mid - th) / eta > 0:
-            lo = mid
+    t = guess if lo < guess < hi else 0.5 * (lo + hi)
+    for _ in range(60):
+        h = np.sin(t) - s + (t - th) / eta
+        if h > 0:
+            lo = t
         else:
-            hi = mid
-    return 0.5 * (lo + hi)
+            hi = t
+        dh = np.cos(t) + 1.0 / eta
+        tn = t - h / dh if dh < 0 else 0.5 * (lo + hi)
+        if not (lo < tn < hi):
+            tn = 0.5 * (lo + hi)
+        if abs(tn - t) < 1e-11:
+            return tn
+        t = tn
+    return t
 
 
 @njit(cache=True)
@@ -110,13 +122,14 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
     total = 0.0
     rate_dt_prev = 0.0
     th_prev = th_lo
+    thb = np.nan
     for j in range(N_GRID):
         u = j / (N_GRID - 1.0)
         # points crowd towards th_c, where the barrier vanishes
         th = th_c - (th_c - th_lo) * (1.0 - u) ** 2
         rate_dt = 0.0
         lin = 1.0 + eta * np.cos(th)
-        thb = _saddle(th, eta, th_c) if j < N_GRID - 1 else np.nan
+        thb = _saddle(th, eta, th_c, thb) if j < N_GRID - 1 else np.nan
         if lin > 0 and not np.isnan(thb):
             e = -0.5 * (np.cos(thb) - np.cos(th)) + (
                 (thb - th - eta * np.sin(th)) ** 2 - (eta * np.sin(th)) ** 2
@@ -141,12 +154,10 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
 @njit(cache=True)
 def _median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float,
               a: float, out: np.ndarray) -> float:  # fmt: skip
-    m = 0
     for i in range(k_seg.size):
         out[i] = k_from_segment(k_seg[i], F_lo[i], F_hi[i], Fmax, a)
     vals = out[~np.isnan(out)]
-    m = vals.size
-    return np.median(vals) if m > 0 else np.nan
+    return np.median(vals) if vals.size > 0 else np.nan
 
 
 @njit(cache=True)
@@ -168,7 +179,7 @@ def invert(F_peak: float, F_after: float, k_seg: np.ndarray, F_lo: np.ndarray,
         pred = expected_peak(Fmax, K, th_lo, a, T, v, mass_kg, gamma)
         ratio = F_peak / pred
         Fmax *= ratio
-        if abs(ratio - 1.0) < 1e-5:
+        if abs(ratio - 1.0) < 1e-4:
             break
     K = _median_k(k_seg, F_lo, F_hi, Fmax, a, K_out)
     return Fmax, K

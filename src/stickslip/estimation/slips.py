@@ -30,6 +30,7 @@ MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
 NOISE_SIGMAS = 5.0  # detection threshold on D_w in units of its noise
 RISE_FACTOR = 3.0  # ... and in units of the median |D_w| (typical stick rise)
 OUTLIER_SIGMAS = 4.0
+BEND_FRACTION = 0.15  # guard-pixel deficit, in units of the fitted rise, that flags a bend
 
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
@@ -175,15 +176,13 @@ def _polyfit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg: i
         t0 += F[i]
         t1 += u * F[i]
         t2 += u2 * F[i]
-    if deg == 1 or s0 < MIN_QUAD_SAMPLES:
+    # Cramer's rule on the 3x3 normal equations (no recursion: numba's cache breaks on it)
+    det = s0 * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
+    if deg == 1 or s0 < MIN_QUAD_SAMPLES or det <= 0:
         det = s0 * s2 - s1 * s1
         if s0 < 2 or det <= 0:
             return (t0 / s0 if s0 > 0 else np.nan), 0.0, 0.0
         return (s2 * t0 - s1 * t1) / det, (s0 * t1 - s1 * t0) / det, 0.0
-    # Cramer's rule on the 3x3 normal equations
-    det = s0 * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
-    if det <= 0:
-        return _polyfit(x, F, lo, hi, xref, 1, mask)
     c0 = t0 * (s2 * s4 - s3 * s3) - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)
     c1 = s0 * (t1 * s4 - t2 * s3) - t0 * (s1 * s4 - s3 * s2) + s2 * (s1 * t2 - t1 * s2)
     c2 = s0 * (s2 * t2 - s3 * t1) - s1 * (s1 * t2 - s3 * t0) + t0 * (s1 * s3 - s2 * s2)
@@ -258,7 +257,7 @@ def _poly_int(row: np.ndarray, A: float, B: float) -> float:
 
 @njit(cache=True)
 def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray,
-                 out: np.ndarray) -> None:  # fmt: skip
+                 sigma: float, out: np.ndarray) -> None:  # fmt: skip
     """Sub-pixel slip position by matching the force integral between two segments."""
     e = int(pre[SEG_END])
     s = int(post[SEG_START])
@@ -282,12 +281,26 @@ def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray
     out[SLIP_F] = _poly_at(pre, Xs)
     out[SLIP_F_AFTER] = _poly_at(post, Xs)
     # peak of the pre-slip branch: its value at the slip, or the vertex if it lies before
+    # At low T the branch bends over just before the slip (vertical tangent at the
+    # T = 0 instability), which no quadratic follows: if the last full pixel before the
+    # slip lies clearly below the fit, trust the data there instead of extrapolating.
+    x_end = Xs
+    g = e + 1
+    if g < s and 0.5 * (x[g] + x[g + 1]) <= Xs:
+        gl = 0.5 * (x[g - 1] + x[g])
+        gr = 0.5 * (x[g] + x[g + 1])
+        pred = _poly_int(pre, gl, gr) / (gr - gl)
+        rise = pred - _poly_at(pre, x[e])
+        if F[g] < pred - max(3.0 * sigma, BEND_FRACTION * rise):
+            out[SLIP_F] = max(F[g], _poly_at(pre, x[e]))
+            x_end = x[e]
+    # peak of the pre-slip branch: its value at the end, or the vertex if it lies before
     peak = out[SLIP_F]
     c2 = pre[SEG_C2]
     if c2 < 0:
         xv = pre[SEG_XREF] - pre[SEG_C1] / (2.0 * c2)
-        if x[int(pre[SEG_START])] < xv < Xs:
-            peak = _poly_at(pre, xv)
+        if x[int(pre[SEG_START])] < xv < x_end:
+            peak = max(peak, _poly_at(pre, xv))
     out[SLIP_PEAK] = peak
 
 
@@ -333,7 +346,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
             continue
         if int(post[SEG_START]) <= int(pre[SEG_END]):
             continue
-        _locate_slip(x, F, pre, post, slips[k])
+        _locate_slip(x, F, pre, post, sigma, slips[k])
     return segs, slips, w, sigma
 
 
