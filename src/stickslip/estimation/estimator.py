@@ -138,7 +138,8 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
 
 @njit(cache=True, parallel=True)
 def _estimate_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, a: np.ndarray,
-                    T: np.ndarray, v: np.ndarray, mass_kg: float, gamma: float) -> np.ndarray:  # fmt: skip
+                    T: np.ndarray, v: np.ndarray, mass_kg: float,
+                    gamma: float) -> np.ndarray:  # fmt: skip
     n = offsets.size - 1
     out = np.empty((n, N_FIELDS))
     for i in prange(n):
@@ -240,16 +241,13 @@ def estimate_array(
     ndarray (N, N_FIELDS)
         Columns given by the module's field constants (``F_MEAN`` ... ``STATUS``).
     """
-    if isinstance(force_nN, np.ndarray) and force_nN.ndim == 2:
-        Fs = [np.asarray(f, float) for f in force_nN]
-    else:
-        Fs = [np.asarray(f, float) for f in force_nN]
+    Fs = [np.ascontiguousarray(f, dtype=float) for f in force_nN]
     if isinstance(x_nm, np.ndarray) and x_nm.ndim == 1:
         xs = [np.asarray(x_nm, float)] * len(Fs)
     else:
         xs = [np.asarray(x, float) for x in x_nm]
     n = len(Fs)
-    if len(xs) != n or any(x.shape != f.shape for x, f in zip(xs, Fs)):
+    if len(xs) != n or any(x.shape != f.shape for x, f in zip(xs, Fs, strict=True)):
         raise ValueError("x_nm and force_nN must have matching shapes")
     offsets = np.zeros(n + 1, dtype=np.int64)
     offsets[1:] = np.cumsum([f.size for f in Fs])
@@ -307,4 +305,4 @@ def estimate_traces(
         return []
     table = estimate_array([t.x_nm for t in traces], [t.force_nN for t in traces], lattice_nm,
                            temperature_K, velocity_nm_per_s, **kwargs)  # fmt: skip
-    return [_to_estimate(t.name, row, t.meta) for t, row in zip(traces, table)]
+    return [_to_estimate(t.name, row, t.meta) for t, row in zip(traces, table, strict=True)]

@@ -136,7 +136,8 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
             ) / (4.0 * eta)
             wmin = np.sqrt(w2 * lin)
             wb = np.sqrt(max(-w2 * (1.0 + eta * np.cos(thb)), 1e-30))
-            pref = wmin / (2.0 * np.pi) * (np.sqrt(0.25 * gamma * gamma + wb * wb) - 0.5 * gamma) / wb
+            kgh = (np.sqrt(0.25 * gamma * gamma + wb * wb) - 0.5 * gamma) / wb
+            pref = wmin / (2.0 * np.pi) * kgh
             # hazard per unit phase: rate x dt/dtheta
             rate_dt = pref * np.exp(-U0 * e / kT) * (a / (2.0 * np.pi)) * lin / v
         if j > 0:

@@ -1,0 +1,107 @@
+"""`stickslip label`: labels CSV, bad input, usage errors."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip.cli.main import app
+from stickslip.data.trace import write_trace_csv
+from stickslip.evaluation.labels_report import COLUMNS, STD_COLUMNS
+from stickslip.simulation.config import PhysicalSettings
+from stickslip.simulation.simulate import simulate
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def good_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("traces")
+    r = simulate([2.0, 3.0], [20.0, 10.0], PhysicalSettings(), seed=4)
+    for i in range(2):
+        write_trace_csv(d / f"good{i}.csv", r.x_nm, r.force_nN[i])
+    return d
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_labels_csv(good_dir, tmp_path):
+    out = tmp_path / "labels.csv"
+    r = runner.invoke(app, ["label", str(good_dir), "--out", str(out), "--plots",
+                            str(tmp_path / "plots")])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[: len(COLUMNS) + len(STD_COLUMNS)] == [*COLUMNS, *STD_COLUMNS]
+    rows = {row["trace"]: row for row in _rows(out)}
+    assert set(rows) == {"good0", "good1"}
+    assert rows["good0"]["quality"] == "ok" and rows["good0"]["regime"] == "single slip"
+    assert float(rows["good0"]["U0_eV"]) == pytest.approx(2.0, rel=0.08)
+    assert float(rows["good1"]["K_N_m"]) == pytest.approx(10.0, rel=0.08)
+    assert (tmp_path / "plots" / "good0.png").is_file()
+
+
+BAD = {
+    "wrongcols": ("a,b\n1,2\n", "needs columns"),
+    "nonnumeric": ("x_nm,force_nN\n" + "".join(f"{i},1\n" for i in range(20)) + "5,abc\n",
+                   "non-numeric"),
+    "nans": ("x_nm,force_nN\n" + "".join(f"{i},{'nan' if i == 3 else 1}\n" for i in range(20)),
+             "NaN"),
+    "short": ("x_nm,force_nN\n" + "".join(f"{i},1\n" for i in range(10)), "samples"),
+    "nonmono": ("x_nm,force_nN\n" + "".join(f"{(i * 7) % 20},1\n" for i in range(20)),
+                "increasing"),
+}  # fmt: skip
+
+
+def test_bad_inputs_are_reported_and_the_rest_labelled(good_dir, tmp_path):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for name, (text, _) in BAD.items():
+        (bad / f"{name}.csv").write_text(text)
+    out = tmp_path / "labels.csv"
+    missing = tmp_path / "missing.csv"
+    r = runner.invoke(app, ["label", str(good_dir), str(bad), str(missing), "--out", str(out)])
+    assert r.exit_code == 1, r.output
+    assert "Traceback" not in r.output
+    err_lines = [ln for ln in r.output.splitlines() if "error:" in ln]
+    assert len(err_lines) == len(BAD) + 1
+    rows = {row["trace"]: row for row in _rows(out)}
+    for name, (_, reason) in BAD.items():
+        assert sum(name in ln for ln in err_lines) == 1
+        assert reason.lower() in rows[name]["quality"].lower()
+        assert rows[name]["U0_eV"] == ""
+    assert rows["missing"]["quality"] == "file not found"
+    assert rows["good0"]["quality"] == rows["good1"]["quality"] == "ok"
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["label", "x.csv"],  # no --out
+        ["label", "x.csv", "--out", "o.csv", "--lattice", "0"],
+        ["label", "x.csv", "--out", "o.csv", "--temperature", "-1"],
+        ["label", "x.csv", "--out", "o.csv", "--velocity", "abc"],
+    ],
+)
+def test_usage_errors_exit_2(args, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2, r.output
+    assert "Traceback" not in r.output
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_smooth_trace_is_flagged_not_failed(tmp_path):
+    r = simulate([0.3], [40.0], PhysicalSettings(), seed=0)
+    write_trace_csv(tmp_path / "smooth.csv", r.x_nm, r.force_nN[0])
+    out = tmp_path / "labels.csv"
+    res = runner.invoke(app, ["label", str(tmp_path / "smooth.csv"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    row = _rows(out)[0]
+    assert row["regime"] == "smooth" and row["quality"] == "smooth sliding"
+    assert np.isnan(float(row["F_mean_nN"])) is False
