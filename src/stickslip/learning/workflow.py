@@ -1,0 +1,136 @@
+"""The jobs behind the ``train``, ``infer`` and ``demo`` commands (no CLI parsing here)."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stickslip.data.dataset import Dataset
+from stickslip.evaluation.report import Evaluation, evaluate_model
+from stickslip.learning.modelfile import TrainedModel, load_model, save_model
+from stickslip.learning.results import format_rows, run_inference, write_panels, write_results
+
+Echo = Callable[[str], None]
+EXAMPLES = "examples"
+MANIFEST = "manifest.json"
+
+
+def validate_and_save(
+    model: TrainedModel, data: Dataset, val_idx: np.ndarray, out: str | os.PathLike
+) -> Evaluation:
+    """Evaluate on the validation trajectories, record the metrics in the model, save it."""
+    ev = evaluate_model(model, data, val_idx)
+    model.metrics["validation"] = ev.metrics
+    save_model(model, out)
+    return ev
+
+
+def infer_job(
+    model: TrainedModel,
+    paths: Sequence[str | os.PathLike],
+    out: str | os.PathLike,
+    plots: str | os.PathLike | None = None,
+    *,
+    lattice_nm: float | None = None,
+    velocity_nm_per_s: float | None = None,
+    temperature_K: float | None = None,
+    calibration_nN_per_V: float | None = None,
+    classical: bool = True,
+    echo: Echo = print,
+    warn: Echo = print,
+    note: Echo = print,
+    traces: list[Any] | None = None,
+    truth: dict[str, dict] | None = None,
+) -> int:
+    """Read traces, estimate, write the table (and panels); returns the failure count.
+
+    Every unreadable or too-short trace is reported through ``warn`` (one line each) and
+    the others are processed.
+    """
+    from stickslip.data.trace import collect_traces
+
+    opts = {"calibration_nN_per_V": calibration_nN_per_V} if calibration_nN_per_V else {}
+    errors: list[Any] = []
+    if traces is None:
+        traces, errors = collect_traces(list(paths), **opts)
+    for e in errors:
+        warn(str(e))
+    res = run_inference(model, traces, lattice_nm, velocity_nm_per_s, temperature_K,
+                        classical=classical, keep_windows=plots is not None)  # fmt: skip
+    for name, reason in res.failures:
+        warn(f"{name}: {reason}")
+    for n in res.notes:
+        note(f"note: {n}")
+    if res.rows:
+        write_results(res.rows, out)
+        echo(format_rows(res.rows, truth))
+        note(f"wrote {out} ({len(res.rows)} traces)")
+        if plots is not None:
+            write_panels(res, traces, plots)
+            note(f"wrote {len(res.rows)} panels in {plots}")
+    else:
+        warn("no trace could be processed; nothing written")
+    return len(errors) + len(res.failures)
+
+
+def examples_dir():
+    """The bundled example traces (a Traversable inside the installed package)."""
+    from importlib.resources import files
+
+    return files("stickslip").joinpath("resources", EXAMPLES)
+
+
+def load_examples() -> tuple[list[Any], dict[str, dict]]:
+    """Bundled example traces (with lattice/velocity in ``meta``) and their true values."""
+    from stickslip.data.formats.text import read_text
+
+    root = examples_dir()
+    manifest = json.loads(root.joinpath(MANIFEST).read_text())
+    traces, truth = [], {}
+    from importlib.resources import as_file
+
+    for item in manifest:
+        with as_file(root.joinpath(item["file"])) as p:
+            (t,) = read_text(Path(p))
+        t.name = Path(item["file"]).stem
+        t.meta.update({k: item[k] for k in ("lattice_nm", "velocity_nm_per_s") if k in item})
+        traces.append(t)
+        truth[t.name] = item
+    return traces, truth
+
+
+def demo_job(out: str | os.PathLike, echo: Echo = print, warn: Echo = print,
+             note: Echo = print) -> int:  # fmt: skip
+    """The main job on the embedded defaults: bundled model, bundled example traces."""
+    model = load_model(None)
+    traces, truth = load_examples()
+    out = Path(out)
+    note(f"bundled model: {model.features.recipe} recipe, window {model.features.window} px; "
+         f"{len(traces)} example traces (true values in the last columns)")  # fmt: skip
+    return infer_job(model, [], out / "results.csv", out / "plots", traces=traces, truth=truth,
+                     echo=echo, warn=warn, note=note)  # fmt: skip
+
+
+def sweep_if_missing(
+    path: str | os.PathLike, n: int, seed: int, physics: Any = "paper"
+) -> Path:
+    """Simulate a sweep of ``n`` trajectories into ``path`` unless it is already there.
+
+    ``physics`` is a preset name or a :class:`~stickslip.simulation.PhysicalSettings`.
+    An existing file is reused only if it was made with the same settings, size and seed.
+    """
+    from stickslip.data.dataset import read_attrs
+    from stickslip.simulation import PRESETS, SweepConfig, run_sweep
+
+    preset = physics if isinstance(physics, str) else "custom"
+    ph = PRESETS[physics] if isinstance(physics, str) else physics
+    cfg = SweepConfig(physics=ph, n=n, seed=seed, preset=preset)
+    path = Path(path)
+    if path.exists() and read_attrs(path).get("config") == cfg.to_json():
+        return path
+    return run_sweep(cfg, path)

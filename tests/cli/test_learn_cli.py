@@ -1,0 +1,102 @@
+"""``stickslip train / infer / evaluate / demo``: outputs, bad inputs, exit codes."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from stickslip.cli.main import app
+from stickslip.data.trace import write_trace_csv
+from stickslip.simulation import PRESETS, SweepConfig, run_sweep, simulate
+
+
+def _run(args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def _errors(result) -> list[str]:
+    return [ln for ln in result.stderr.splitlines() if ln.startswith("stickslip: error:")]
+
+
+@pytest.fixture(scope="module")
+def traces(tmp_path_factory):
+    d = tmp_path_factory.mktemp("traces")
+    res = simulate([1.0, 3.0], [10.0, 20.0], seed=7)
+    for i, f in enumerate(res.force_nN):
+        write_trace_csv(d / f"good{i}.csv", res.x_nm, f)
+    return d
+
+
+def test_infer_reports_bad_files_and_processes_the_rest(traces, tmp_path):
+    (tmp_path / "garbage.csv").write_text("hello,world\nfoo,bar\n")
+    write_trace_csv(tmp_path / "short.csv", np.arange(30) * 0.0215, np.ones(30))
+    out = tmp_path / "res.csv"
+    r = _run(["infer", traces / "good0.csv", tmp_path / "garbage.csv", tmp_path / "missing.csv",
+              tmp_path / "short.csv", traces / "good1.csv", "--out", out, "--plots",
+              tmp_path / "plots"])  # fmt: skip
+    assert r.exit_code == 1, r.output
+    errs = _errors(r)
+    assert len(errs) == 3 and "Traceback" not in r.output
+    assert any("garbage.csv" in e for e in errs) and any("missing.csv" in e for e in errs)
+    assert any("short" in e and "too short" in e for e in errs)
+    rows = list(csv.DictReader(out.open()))
+    assert [row["trace"] for row in rows] == ["good0", "good1"]
+    for col in ("F_mean_nN", "U0_eV", "K_N_m", "eta", "U0_eV_std", "K_N_m_std", "n_windows"):
+        assert col in rows[0]
+    assert abs(float(rows[0]["U0_eV"]) - 1.0) < 0.3 and abs(float(rows[1]["K_N_m"]) - 20) < 4
+    assert len(list((tmp_path / "plots").glob("*.png"))) == 2
+
+
+def test_infer_bad_model_files_give_one_line(traces, tmp_path):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"garbage" * 50)
+    old = tmp_path / "old.pt"
+    torch.save({"format": "stickslip-model-0", "stickslip_version": "0.0.1"}, old)
+    for model in (bad, old, tmp_path / "none.pt"):
+        r = _run(["infer", traces, "--model", model, "--out", tmp_path / "r.csv"])
+        assert r.exit_code == 2 and len(_errors(r)) == 1 and "Traceback" not in r.output
+        assert str(model) in _errors(r)[0]
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_infer_on_another_lattice(tmp_path):
+    ph = PRESETS["mos2"]
+    res = simulate([2.0], [15.0], ph, seed=3)
+    write_trace_csv(tmp_path / "mos2.csv", res.x_nm, res.force_nN[0])
+    r = _run(["infer", tmp_path / "mos2.csv", "--lattice", 0.316, "--velocity", 30,
+              "--out", tmp_path / "r.csv", "--no-classical"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "thermal activation is not mapped" in r.stderr
+    row = next(csv.DictReader((tmp_path / "r.csv").open()))
+    assert abs(float(row["U0_eV"]) - 2.0) < 0.4 and abs(float(row["K_N_m"]) - 15.0) < 3
+
+
+def test_train_and_evaluate_small(tmp_path):
+    data = tmp_path / "s.h5"
+    run_sweep(SweepConfig(n=40, seed=9), data, progress=False)
+    model = tmp_path / "m.pt"
+    r = _run(["train", "--data", data, "--features", "raw", "--epochs", 2, "--window", 32,
+              "--out", model, "--no-progress"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert model.exists() and model.with_suffix(".loss.png").exists()
+    r = _run(["evaluate", "--model", model, "--data", data, "--out", tmp_path / "ev"])
+    assert r.exit_code == 0, r.output
+    for name in ("metrics.json", "metrics.csv", "predictions.csv", "parity.png"):
+        assert (tmp_path / "ev" / name).exists()
+    r = _run(["train", "--data", tmp_path / "nope.h5", "--out", model])
+    assert r.exit_code == 2 and len(_errors(r)) == 1
+    r = _run(["train", "--data", data, "--features", "fft", "--out", model])
+    assert r.exit_code == 2 and "raw or pi" in r.stderr
+
+
+def test_demo_runs(tmp_path):
+    r = _run(["demo", "--out", tmp_path / "demo"])
+    assert r.exit_code == 0, r.output
+    assert "graphene_clean_single_slip" in r.stdout and "mos2" in r.stdout
+    rows = list(csv.DictReader((tmp_path / "demo" / "results.csv").open()))
+    assert len(rows) == 6
+    assert len(list((tmp_path / "demo" / "plots").glob("*.png"))) == 6
