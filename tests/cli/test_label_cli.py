@@ -104,4 +104,4 @@ def test_smooth_trace_is_flagged_not_failed(tmp_path):
     assert res.exit_code == 0, res.output
     row = _rows(out)[0]
     assert row["regime"] == "smooth" and row["quality"] == "smooth sliding"
-    assert np.isnan(float(row["F_mean_nN"])) is False
+    assert not np.isnan(float(row["F_mean_nN"]))
