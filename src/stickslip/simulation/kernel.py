@@ -17,9 +17,11 @@ import math
 
 import numba as nb
 import numpy as np
+from numba import types
 from numba.cpython.unsafe.numbers import leading_zeros
+from numba.extending import overload
 
-from stickslip.simulation.lanes import Lanes
+from stickslip.simulation.lanes import MAX_DEFECTS, Lanes
 
 LANES = 32
 
@@ -43,6 +45,10 @@ _U43 = np.uint64(43)
 _U47 = np.uint64(47)
 _U49 = np.uint64(49)
 _U1 = np.uint64(1)
+_INV_2PI = 1.0 / (2.0 * math.pi)
+_E3, _E4, _E5, _E6, _E7, _E8, _E9, _E10, _E11, _E12 = (
+    1.0 / math.factorial(k) for k in range(3, 13)
+)
 _U15 = np.uint64(15)
 
 _jit = nb.njit(cache=True, fastmath=True, inline="always")
@@ -114,29 +120,101 @@ def box_muller(ra, rb):
 
 
 @_jit
-def substrate_force(aug, x, f0, inv_a, half_U0, i):
-    """-dU/dx of the substrate at tip position ``x`` for lane ``i``.
-
-    ``aug`` is None for the plain sinusoid (numba prunes the other branch at compile
-    time, so plain runs keep the libm-free vector code), else the tuple
-    ``(modulation (N, 3) [amplitude, q, phase], defect x, defect H, defect 1/(2w^2))``.
-    """
-    if aug is None:
-        return -f0 * sin_2pi(x * inv_a)
-    mod, def_x, def_H, def_c = aug
-    amp, q, ph = mod[i, 0], mod[i, 1], mod[i, 2]
-    kx = _TWO_PI * x * inv_a
-    qx = q * x + ph
-    fs = -f0 * (1.0 + amp * math.cos(qx)) * math.sin(kx)
-    fs -= half_U0 * amp * q * math.sin(qx) * math.cos(kx)
-    for j in range(def_x.shape[1]):
-        d = x - def_x[i, j]
-        fs += 2.0 * def_H[i, j] * def_c[i, j] * d * math.exp(-def_c[i, j] * d * d)
-    return fs
+def exp_neg(z):
+    """exp(-z) for 0 <= z <= 40 (no libm): Taylor series at z/64, squared six times."""
+    t = -min(z, 40.0) * (1.0 / 64.0)
+    p = _E12
+    p = p * t + _E11
+    p = p * t + _E10
+    p = p * t + _E9
+    p = p * t + _E8
+    p = p * t + _E7
+    p = p * t + _E6
+    p = p * t + _E5
+    p = p * t + _E4
+    p = p * t + _E3
+    p = p * t + 0.5
+    p = p * t + 1.0
+    p = p * t + 1.0
+    p = p * p
+    p = p * p
+    p = p * p
+    p = p * p
+    p = p * p
+    return p * p
 
 
 @_jit
-def baoab(aug, xx, uu, XX, ff, g, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i):
+def defect_force(sub, x, l, j):
+    """Force of Gaussian defect ``j`` of lane ``l`` (``H exp(-(x-x_j)^2 / (2 w^2))``)."""
+    d = x - sub[3 + j, l]
+    cj = sub[3 + 2 * MAX_DEFECTS + j, l]
+    return 2.0 * sub[3 + MAX_DEFECTS + j, l] * cj * d * exp_neg(cj * d * d)
+
+
+def local_substrate(aug, idx):
+    """Block-local copy of the augmented-substrate parameters (None when plain).
+
+    Rows: amplitude, q [rad/nm], phase / 2 pi, then ``MAX_DEFECTS`` rows each of defect
+    positions [nm], heights H [nN nm] and 1/(2 w^2) [1/nm^2]; one column per lane.
+    Dispatched on the type of ``aug`` at compile time (see the overload below).
+    """
+    raise NotImplementedError("numba-only")
+
+
+def substrate_force(sub, x, f0, inv_a, half_U0, l):
+    """-dU/dx of the substrate at tip position ``x`` for lane ``l`` of a block.
+
+    ``sub`` is None for the plain sinusoid, else the block-local array of
+    :func:`local_substrate`. The choice is made at compile time from the type of
+    ``sub``, so plain runs carry no augmented code, and polynomial sine and exponential
+    keep the augmented kernel vectorised too.
+    """
+    raise NotImplementedError("numba-only")
+
+
+@overload(local_substrate, inline="always")
+def _ov_local_substrate(aug, idx):
+    if isinstance(aug, types.NoneType):
+        return lambda aug, idx: None
+
+    def impl(aug, idx):
+        mod, def_x, def_H, def_c = aug
+        out = np.zeros((3 + 3 * MAX_DEFECTS, LANES))
+        for l in range(LANES):
+            i = idx[l]
+            out[0, l] = mod[i, 0]
+            out[1, l] = mod[i, 1]
+            out[2, l] = mod[i, 2]
+            for j in range(MAX_DEFECTS):
+                out[3 + j, l] = def_x[i, j]
+                out[3 + MAX_DEFECTS + j, l] = def_H[i, j]
+                out[3 + 2 * MAX_DEFECTS + j, l] = def_c[i, j]
+        return out
+
+    return impl
+
+
+@overload(substrate_force, inline="always", jit_options={"fastmath": True})
+def _ov_substrate_force(sub, x, f0, inv_a, half_U0, l):
+    if isinstance(sub, types.NoneType):
+        return lambda sub, x, f0, inv_a, half_U0, l: -f0 * sin_2pi(x * inv_a)
+
+    def impl(sub, x, f0, inv_a, half_U0, l):
+        t = x * inv_a
+        amp, q = sub[0, l], sub[1, l]
+        u = q * x * _INV_2PI + sub[2, l]
+        s_k, c_k = sin_2pi(t), sin_2pi(t + 0.25)
+        fs = -f0 * (1.0 + amp * sin_2pi(u + 0.25)) * s_k
+        fd = defect_force(sub, x, l, 0) + defect_force(sub, x, l, 1)
+        fd += defect_force(sub, x, l, 2) + defect_force(sub, x, l, 3)
+        return fs - half_U0 * amp * q * sin_2pi(u) * c_k + fd
+
+    return impl
+
+
+@_jit
+def baoab(sub, xx, uu, XX, ff, g, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i):
     """One BAOAB step; ``ff`` is the total force at the start. Returns the new state,
     the new total force and the recorded force ``K (X - x)``."""
     uu = uu + hdtm * ff
@@ -145,19 +223,19 @@ def baoab(aug, xx, uu, XX, ff, g, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i):
     xx = xx + hdt * uu
     XX = XX + dX
     fk = K * (XX - xx)
-    ff = substrate_force(aug, xx, f0, ia, hU, i) + fk
+    ff = substrate_force(sub, xx, f0, ia, hU, i) + fk
     uu = uu + hdtm * ff
     return xx, uu, XX, ff, fk
 
 
 @_jit
-def two_steps(aug, a0, a1, xx, uu, XX, ff, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i):
+def two_steps(sub, a0, a1, xx, uu, XX, ff, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i):
     """Two BAOAB steps sharing one Box-Muller pair; returns the new generator state,
     the new state and the sum of the two recorded forces."""
     ra, rb, a0, a1 = xoroshiro_pair(a0, a1)
     g1, g2 = box_muller(ra, rb)
-    xx, uu, XX, ff, fk1 = baoab(aug, xx, uu, XX, ff, g1, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i)
-    xx, uu, XX, ff, fk2 = baoab(aug, xx, uu, XX, ff, g2, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i)
+    xx, uu, XX, ff, fk1 = baoab(sub, xx, uu, XX, ff, g1, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i)
+    xx, uu, XX, ff, fk2 = baoab(sub, xx, uu, XX, ff, g2, f0, ia, hU, K, hdt, hdtm, c, sig, dX, i)
     return a0, a1, xx, uu, XX, ff, fk1 + fk2
 
 
@@ -181,6 +259,7 @@ def run_blocks(
         Lf0, Lia, LK, LhU = f0[idx], inv_a[idx], K[idx], half_U0[idx]
         Lhdt, Lhdtm, Lc, Lsig, LdX = hdt[idx], hdt_m[idx], c[idx], sig[idx], dX[idx]
         s0, s1 = rng0[idx], rng1[idx]
+        sub = local_substrate(aug, idx)
         warm = n_warm[idx]
         w_max = warm.max()
         # Lanes with a shorter warm-up start later and sit still until then, so a
@@ -192,13 +271,13 @@ def run_blocks(
         acc = np.zeros(LANES)
         ft = np.zeros(LANES)
         for l in range(LANES):
-            ft[l] = substrate_force(aug, 0.0, Lf0[l], Lia[l], LhU[l], idx[l])
+            ft[l] = substrate_force(sub, 0.0, Lf0[l], Lia[l], LhU[l], l)
 
         for i2 in range(0, w_max, 2):  # warm-up
             for l in range(LANES):
                 a0, a1, xx, uu, XX, ff, _ = two_steps(
-                    aug, s0[l], s1[l], x[l], u[l], X[l], ft[l], Lf0[l], Lia[l], LhU[l],
-                    LK[l], Lhdt[l], Lhdtm[l], Lc[l], Lsig[l], LdX[l], idx[l],
+                    sub, s0[l], s1[l], x[l], u[l], X[l], ft[l], Lf0[l], Lia[l], LhU[l],
+                    LK[l], Lhdt[l], Lhdtm[l], Lc[l], Lsig[l], LdX[l], l,
                 )  # fmt: skip
                 act = i2 >= start[l]
                 s0[l] = a0 if act else s0[l]
@@ -210,12 +289,12 @@ def run_blocks(
 
         for p in range(n_pix):  # recording: a pixel is the mean force over its steps
             acc[:] = 0.0
-            for sub in range(n_sub):
+            for j_sub in range(n_sub):
                 for _ in range(n_ps // 2):
                     for l in range(LANES):
                         a0, a1, xx, uu, XX, ff, fsum = two_steps(
-                            aug, s0[l], s1[l], x[l], u[l], X[l], ft[l], Lf0[l], Lia[l], LhU[l],
-                            LK[l], Lhdt[l], Lhdtm[l], Lc[l], Lsig[l], LdX[l], idx[l],
+                            sub, s0[l], s1[l], x[l], u[l], X[l], ft[l], Lf0[l], Lia[l], LhU[l],
+                            LK[l], Lhdt[l], Lhdtm[l], Lc[l], Lsig[l], LdX[l], l,
                         )  # fmt: skip
                         s0[l] = a0
                         s1[l] = a1
@@ -226,8 +305,8 @@ def run_blocks(
                         acc[l] += fsum
                 if record_fine:
                     for l in range(nl):
-                        fine_x[lo + l, p * n_sub + sub] = x[l]
-                        fine_F[lo + l, p * n_sub + sub] = LK[l] * (X[l] - x[l])
+                        fine_x[lo + l, p * n_sub + j_sub] = x[l]
+                        fine_F[lo + l, p * n_sub + j_sub] = LK[l] * (X[l] - x[l])
             for l in range(nl):
                 out_F[lo + l, p] = acc[l] * inv_npp
 
@@ -251,8 +330,14 @@ def integrate_numba(lanes: Lanes, record_fine: bool = False):
     fine_x, fine_F = np.zeros(shape), np.zeros(shape)
     aug = None
     if lanes.augmented:
-        mod = np.ascontiguousarray(np.column_stack([lanes.mod_amp, lanes.mod_q, lanes.mod_phase]))
-        aug = (mod, lanes.def_x, lanes.def_H, lanes.def_c)
+        mod = np.column_stack([lanes.mod_amp, lanes.mod_q, lanes.mod_phase / (2 * np.pi)])
+        pad = ((0, 0), (0, MAX_DEFECTS - lanes.def_x.shape[1]))
+        aug = (
+            np.ascontiguousarray(mod),
+            np.pad(lanes.def_x, pad),
+            np.pad(lanes.def_H, pad),  # zero height: padded defects exert no force
+            np.pad(lanes.def_c, pad, constant_values=1.0),
+        )
     run_blocks(
         aug, lanes.f0, lanes.inv_a, lanes.K, lanes.hdt, lanes.hdt_m, lanes.c, lanes.sig,
         lanes.dX, lanes.n_warm, lanes.rng0, lanes.rng1, lanes.half_U0,

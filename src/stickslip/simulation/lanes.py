@@ -22,6 +22,7 @@ from stickslip.units import (
 )
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+MAX_DEFECTS = 4  # defects per line (the kernel's defect sum is written out for 4)
 
 
 @dataclass
@@ -163,6 +164,10 @@ def prepare_lanes(
         def_x, def_H, def_c = np.zeros((n, 1)), np.zeros((n, 1)), np.ones((n, 1))
     else:
         dx_, dh, dw = (np.atleast_2d(np.asarray(v, float)) for v in defects)
+        if dx_.shape[1] > MAX_DEFECTS:
+            from stickslip.simulation.config import SettingsError
+
+            raise SettingsError(f"at most {MAX_DEFECTS} defects per line (got {dx_.shape[1]})")
         def_x, def_H, def_c = dx_, dh * U0[:, None], 1.0 / (2.0 * dw**2)
     return Lanes(
         f0=np.pi * U0 / a,

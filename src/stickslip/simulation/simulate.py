@@ -138,6 +138,8 @@ def simulate(
     # trajectories with different velocities have different step layouts: one call each
     for n_pp in np.unique(lanes.steps_per_pixel):
         sel = np.flatnonzero(lanes.steps_per_pixel == n_pp)
+        # similar warm-ups share a block: lanes idle less while the longest one warms up
+        sel = sel[np.argsort(lanes.n_warm[sel], kind="stable")]
         f, fx, fF = run(lanes.subset(sel), record_fine)
         force[sel] = f
         if record_fine:

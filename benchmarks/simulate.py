@@ -1,0 +1,88 @@
+"""Simulator speed: particle-steps/s, wall time of the paper dataset, peak memory.
+
+Usage: python benchmarks/simulate.py [--n 1600] [--threads N]
+
+The paper dataset is the default sweep (1600 trajectories of the paper preset: 11 nm
+recorded at 60 nm/s after a warm-up of max(1 nm, F_max/K + 4a), dt = 10 ns), written to a
+temporary HDF5 file exactly as `stickslip simulate --preset paper --n 1600` does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import tempfile
+import time
+
+import numba
+import numpy as np
+
+
+def machine() -> str:
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if "model name" in line)
+    except (OSError, StopIteration):
+        pass
+    return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.machine()}, "
+            f"Python {platform.python_version()}, numba {numba.__version__}, "
+            f"numba threads {numba.get_num_threads()}")  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1600)
+    ap.add_argument("--threads", type=int, default=None)
+    args = ap.parse_args()
+    if args.threads:
+        numba.set_num_threads(args.threads)
+
+    from stickslip.simulation import PhysicalSettings, SweepConfig, run_sweep, simulate
+    from stickslip.simulation.config import warmup_nm_for
+    from stickslip.simulation.sweep import sweep_table
+
+    print(f"machine: {machine()}")
+    t0 = time.perf_counter()
+    simulate([1.0], [10.0], PhysicalSettings(length_nm=0.05, pixels=8))
+    print(f"first call (numba compile or cache load): {time.perf_counter() - t0:.2f} s")
+
+    # kernel rate on uniform lanes
+    n, s = 256, PhysicalSettings(length_nm=2.0, pixels=64, warmup_nm=1.0)
+    t0 = time.perf_counter()
+    simulate(np.full(n, 2.0), np.full(n, 10.0), s)
+    dt = time.perf_counter() - t0
+    steps = n * 3.0 / (s.velocity_nm_per_s * s.dt_s)
+    print(f"kernel, {n} trajectories x {steps / n:.3g} steps: {steps / dt:.3g} particle-steps/s")
+
+    # numpy reference for comparison (short run)
+    n_ref, s_ref = 256, PhysicalSettings(length_nm=0.02, pixels=8, warmup_nm=0.0)
+    t0 = time.perf_counter()
+    simulate(np.full(n_ref, 2.0), np.full(n_ref, 10.0), s_ref, backend="numpy")
+    dt = time.perf_counter() - t0
+    steps = n_ref * 0.02 / (s_ref.velocity_nm_per_s * s_ref.dt_s)
+    print(f"numpy reference (vectorised over trajectories): {steps / dt:.3g} particle-steps/s")
+
+    cfg = SweepConfig(n=args.n, seed=0)
+    table = sweep_table(cfg)
+    ph = cfg.physics
+    warm = warmup_nm_for(table["U0_eV"], table["K_N_m"], table["lattice_nm"], ph.warmup_nm)
+    total_steps = float(np.sum((warm + ph.length_nm) / (ph.velocity_nm_per_s * ph.dt_s)))
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        run_sweep(cfg, os.path.join(tmp, "sweep.h5"), progress=False)
+        wall = time.perf_counter() - t0
+    print(f"paper dataset: {args.n} trajectories, {total_steps:.3g} particle-steps "
+          f"(mean travel {np.mean(warm) + ph.length_nm:.2f} nm incl. warm-up)")  # fmt: skip
+    print(f"paper dataset wall time: {wall:.1f} s  ->  {total_steps / wall:.3g} particle-steps/s")
+    equiv = args.n * 12.0 / (ph.velocity_nm_per_s * ph.dt_s)
+    print(f"  (12 nm per trajectory, {equiv:.3g} particle-steps, would take "
+          f"{equiv / (total_steps / wall):.1f} s at this rate)")  # fmt: skip
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak memory (max RSS): {peak:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
