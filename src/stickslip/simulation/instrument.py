@@ -75,10 +75,11 @@ def offset_drift(
 
 
 def digitise(force_nN: np.ndarray, bits: int, full_scale_nN: np.ndarray) -> np.ndarray:
-    """Quantise to ``2**bits`` levels over ``[-full_scale, +full_scale]`` (clipping outside)."""
+    """Quantise to ``2**bits`` levels over ``[-full_scale, +full_scale]`` (mid-rise ADC)."""
     fs = np.asarray(full_scale_nN, float)[:, None]
-    step = 2.0 * fs / (2**bits - 1)
-    return np.clip(np.round(force_nN / step) * step, -fs, fs)
+    step = 2.0 * fs / 2**bits
+    q = (np.floor(force_nN / step) + 0.5) * step
+    return np.clip(q, -fs + 0.5 * step, fs - 0.5 * step)
 
 
 def precursor_softening(force_nN: np.ndarray, strength: np.ndarray, power: float = 3.0):
