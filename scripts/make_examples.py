@@ -28,7 +28,7 @@ EXAMPLES = [
     ("graphene_clean_stiff", 4.0, 40.0, "paper", 0.0),
     ("graphene_clean_multiple_slip", 3.0, 6.0, "paper", 0.0),
     ("graphene_noisy_0.05nN", 2.0, 15.0, "paper", 0.05),
-    ("graphene_noisy_0.15nN", 1.5, 8.0, "paper", 0.15),
+    ("graphene_noisy_0.1nN", 1.5, 8.0, "paper", 0.1),
     ("mos2_a0.316_v30", 2.5, 20.0, "mos2", 0.0),
 ]
 

@@ -31,7 +31,8 @@ def test_windows_carry_their_trajectory_labels(small_sweep):
     y = np.arange(small_sweep.n * 3, dtype=float).reshape(-1, 3)
     x, yw = window_set(small_sweep.force_nN[:5], y[:5], spec, 16)
     per = (512 - 64) // 16 + 1
-    assert x.shape == (5 * per, 127)
+    assert x.shape == (5 * per, 64)
+    np.testing.assert_array_equal(x[per + 1], small_sweep.force_nN[1, 16:80])
     np.testing.assert_array_equal(yw[per * 2 : per * 3], np.repeat(y[2:3], per, axis=0))
 
 

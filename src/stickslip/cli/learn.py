@@ -44,6 +44,10 @@ def train_cmd(
     ),
     train_stride: int = typer.Option(16, "--train-stride", help="Window stride for training."),
     seed: int = typer.Option(0, "--seed", help="Seed of the split and the optimiser."),
+    noise: float = typer.Option(
+        0.0, "--noise", help="Augmentation: white noise per window, sigma uniform in [0, NOISE] "
+        "nN, redrawn every epoch (0: the paper's clean training)."
+    ),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar."),
 ) -> None:
     """Train the reference paper's MLP on a simulated sweep (80/20 split by trajectory).
@@ -58,14 +62,14 @@ def train_cmd(
 
     if features not in ("raw", "pi"):
         usage_error(f"--features must be raw or pi (got '{features}')")
-    if epochs < 1 or batch_size < 1 or not lr > 0:
-        usage_error("--epochs, --batch-size and --lr must be positive")
+    if epochs < 1 or batch_size < 1 or not lr > 0 or noise < 0:
+        usage_error("--epochs, --batch-size and --lr must be positive, --noise >= 0")
     ds = _load_data(data)
     try:
         spec = spec_for_dataset(ds, features, window, stride or window, train_stride)
         if ds.force_nN.shape[1] < window:
             usage_error(f"--window {window} is longer than the traces ({ds.force_nN.shape[1]})")
-        cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
+        cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, noise_nN=noise)
         model, hist, val_idx = train_model(ds, spec, cfg, progress=progress)
     except (FeatureError, ValueError) as e:
         usage_error(str(e))

@@ -11,7 +11,7 @@ import numpy as np
 from stickslip.data.atomic import write_text_atomic
 from stickslip.data.dataset import Dataset
 from stickslip.evaluation.metrics import format_table, metrics_table, write_metrics
-from stickslip.learning.inference import predict_array
+from stickslip.learning.inference import PIXEL_TOLERANCE, map_trace, predict_array
 from stickslip.learning.modelfile import TrainedModel
 
 EVAL_KEYS = ("F_mean_nN", "F_mean_net", "U0_eV", "K_N_m", "eta")
@@ -38,12 +38,13 @@ def evaluate_model(
 ) -> Evaluation:
     """Per-trajectory estimates of a dataset's traces and the metrics against its labels.
 
-    The traces must have the training pixel grid (true of simulated sweeps with the
-    same line length and pixels). With ``lattice_mapping``, each trajectory's own
-    lattice spacing (``params["lattice_nm"]``) is used to map its estimates.
+    With ``lattice_mapping``, each trajectory's own lattice spacing
+    (``params["lattice_nm"]``) is used to map it onto the training lattice; traces
+    whose pixel differs from the training pixel are resampled either way.
     """
     rows = np.arange(data.n) if rows is None else np.asarray(rows)
-    from stickslip.learning.inference import map_trace
+    spec = model.features
+    pixel = float((data.x_nm[-1] - data.x_nm[0]) / (data.x_nm.size - 1))
 
     lattice = np.asarray(data.params["lattice_nm"], dtype=float)[rows]
     forces = data.force_nN[rows]
@@ -53,7 +54,8 @@ def evaluate_model(
         for s in range(0, sel.size, batch):
             idx = sel[s : s + batch]
             f = forces[idx]
-            if a is not None and a != model.features.lattice_nm:
+            scale = 1.0 if a is None else a / spec.lattice_nm
+            if abs(pixel / scale / spec.pixel_nm - 1) > PIXEL_TOLERANCE:
                 f = np.stack([map_trace(data.x_nm, fi, model, a) for fi in f])
             res = predict_array(model, f, lattice_nm=a)
             res["F_mean_nN"] = forces[idx].mean(axis=1)

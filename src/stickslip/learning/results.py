@@ -141,14 +141,15 @@ def write_results(rows: Sequence[dict[str, Any]], path: str | os.PathLike) -> Pa
 def format_rows(rows: Sequence[dict[str, Any]], truth: dict[str, dict] | None = None) -> str:
     """A compact terminal table (network estimates +- window spread, classical beside)."""
     has_cl = any("classical_U0_eV" in r for r in rows)
-    head = f"{'trace':<24}{'<F> nN':>9}{'U0 eV':>15}{'K N/m':>15}{'eta':>8}{'win':>5}"
+    w = min(max([len(r["trace"]) for r in rows] + [5]), 40) + 1
+    head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>15}{'K N/m':>15}{'eta':>8}{'win':>5}"
     if has_cl:
         head += f"{'| classical U0':>15}{'K':>8}"
     if truth:
         head += f"{'| true U0':>10}{'K':>7}"
     lines = [head]
     for r in rows:
-        s = (f"{r['trace'][:23]:<24}{r['F_mean_nN']:>9.3f}"
+        s = (f"{r['trace'][: w - 1]:<{w}}{r['F_mean_nN']:>9.3f}"
              f"{r['U0_eV']:>8.3f}+-{r['U0_eV_std']:<5.2f}{r['K_N_m']:>8.2f}+-{r['K_N_m_std']:<5.2f}"
              f"{r['eta']:>8.2f}{r['n_windows']:>5d}")  # fmt: skip
         if has_cl:
