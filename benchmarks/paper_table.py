@@ -40,7 +40,7 @@ def main() -> None:
     train = load_dataset(sweep_if_missing(args.work / "train.h5", args.n_train, args.train_seed))
     test = load_dataset(sweep_if_missing(args.work / "test.h5", args.n_test, args.test_seed))
     summary = {}
-    print(f"{'recipe':<6}{'target':<12}{'RMSE':>9}{'paper':>8}{'goal':>8}{'rel mean':>10}"
+    print(f"{'recipe':<7}{'target':<12}{'RMSE':>9}{'paper':>8}{'goal':>8}{'rel mean':>10}"
           f"{'rel med':>9}{'train s':>9}")  # fmt: skip
     for recipe in ("raw", "pi"):
         spec = spec_for_dataset(train, recipe, WINDOW, STRIDE, TRAIN_STRIDE)
@@ -52,7 +52,7 @@ def main() -> None:
             m = ev.metrics[key]
             paper = PAPER_MD_MD_RMSE.get(ref, float("nan")) if ref else float("nan")
             goal = TARGET_RMSE.get(ref, float("nan")) if ref else float("nan")
-            print(f"{recipe:<6}{key:<12}{m['rmse']:>9.4f}{paper:>8.2f}{goal:>8.2f}"
+            print(f"{recipe:<7}{key:<12}{m['rmse']:>9.4f}{paper:>8.2f}{goal:>8.2f}"
                   f"{m['rel_mean_abs']:>10.2%}{m['rel_median_abs']:>9.2%}{hist.seconds:>9.0f}")
     (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print("F_mean_nN = the trace's own mean (exact on clean traces); F_mean_net = the network's")

@@ -18,6 +18,7 @@ Layout (a dict of plain types and tensors, so ``torch.load(weights_only=True)`` 
 from __future__ import annotations
 
 import os
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,6 +151,9 @@ def load_model(path: str | os.PathLike | None = None) -> TrainedModel:
     p = Path(path)
     if not p.is_file():
         raise ModelFileError(f"{p}: model file not found")
+    if not zipfile.is_zipfile(p):
+        raise ModelFileError(f"{p}: unreadable model file (not a torch archive: damaged or "
+                             "not a model)")  # fmt: skip
     try:
         payload = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as e:  # torch raises many types for a damaged file

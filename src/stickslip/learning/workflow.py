@@ -50,7 +50,7 @@ def infer_job(
     """Read traces, estimate, write the table (and panels); returns the failure count.
 
     Every unreadable or too-short trace is reported through ``warn`` (one line each) and
-    the others are processed.
+    the others are processed. No processable trace at all counts as a failure.
     """
     from stickslip.data.trace import collect_traces
 
@@ -73,9 +73,9 @@ def infer_job(
         if plots is not None:
             write_panels(res, traces, plots)
             note(f"wrote {len(res.rows)} panels in {plots}")
-    else:
-        warn("no trace could be processed; nothing written")
-    return len(errors) + len(res.failures)
+        return len(errors) + len(res.failures)
+    warn("no trace could be processed; nothing written")
+    return len(errors) + len(res.failures) + 1
 
 
 def examples_dir():
