@@ -149,6 +149,12 @@ def load_model(path: str | os.PathLike | None = None) -> TrainedModel:
         with as_file(ref) as p:
             return load_model(p)
     p = Path(path)
+    return from_payload(read_payload(p), str(p))
+
+
+def read_payload(path: str | os.PathLike) -> dict[str, Any]:
+    """The dict stored in a model file (any kind), or a one-line :class:`ModelFileError`."""
+    p = Path(path)
     if not p.is_file():
         raise ModelFileError(f"{p}: model file not found")
     if not zipfile.is_zipfile(p):
@@ -159,7 +165,9 @@ def load_model(path: str | os.PathLike | None = None) -> TrainedModel:
     except Exception as e:  # torch raises many types for a damaged file
         reason = str(e).splitlines()[0][:120] if str(e) else type(e).__name__
         raise ModelFileError(f"{p}: unreadable model file ({reason})") from None
-    return from_payload(payload, str(p))
+    if not isinstance(payload, dict) or "format" not in payload:
+        raise ModelFileError(f"{p}: not a stickslip model file")
+    return payload
 
 
 DEFAULT_MODEL_NAME = "default_model.pt"

@@ -1,0 +1,151 @@
+"""The laboratory test bench: every estimator on clean simulations and on the bench.
+
+The bench (src/stickslip/evaluation/bench.py) is simulated traces that carry the
+real-world effects of ../shared/PHYSICS.md, with ground truth: graphite, MoS2 and WS2
+lattices, 30 nm/s, barrier modulation and defects, precursor softening, detector
+low-pass, white and 1/f noise, offset drift, 16-bit digitisation. Seeds are disjoint
+from every training seed.
+
+Estimators: the five-line baseline, the classical estimator, the reference paper's
+MLPs (raw and pi recipes, trained here on 1600 clean paper-preset trajectories) and the
+whole-line CNN ensemble with uncertainty (``--line-model``, default: the bundled one).
+Prints, per data set, RMSE of <F> and relative RMSE of U0, K (1.5 <= eta <= 40), and
+the coverage of the 68 % / 95 % intervals; writes summary.json and reliability plots.
+
+Usage: python benchmarks/lab_bench.py [--work build/lab-bench] [--n-per-material 200]
+       [--n-clean 300] [--line-model PATH] [--epochs 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from stickslip.data.dataset import load_dataset
+from stickslip.data.trace import Trace
+from stickslip.estimation import estimate_array
+from stickslip.estimation import estimator as E
+from stickslip.estimation.baseline import five_line_estimate
+from stickslip.evaluation.bench import MATERIALS, BenchConfig, make_bench
+from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
+from stickslip.learning.inference import predict_traces
+from stickslip.learning.line import Z95, predict_raw_lines
+from stickslip.learning.modelfile import load_model, save_model
+from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.learning.workflow import sweep_if_missing
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
+
+
+def window_model(work: Path, recipe: str, epochs: int):
+    """The paper's MLP for a recipe, trained on clean paper-preset data (cached)."""
+    path = work / f"mlp_{recipe}.pt"
+    if path.exists():
+        return load_model(path)
+    train = load_dataset(sweep_if_missing(work / "train.h5", 1600, 10))
+    spec = spec_for_dataset(train, recipe, 64, 64, 16)
+    model, _, _ = train_model(train, spec, TrainConfig(epochs=epochs), progress=False)
+    save_model(model, path)
+    return model
+
+
+def predictions(ds, line_model, mlps) -> dict[str, dict[str, np.ndarray]]:
+    """Each estimator's <F>, U0, K (and intervals for the line model) on a data set."""
+    p, F, x = ds.params, ds.force_nN.astype(float), ds.x_nm
+    a, v = p["lattice_nm"], p["velocity_nm_per_s"]
+    out = {"five-line": five_line_estimate(x, F, a)}
+    tab = estimate_array(x, F, a, p["temperature_K"], v)
+    out["classical"] = {"F_mean_nN": tab[:, E.F_MEAN], "U0_eV": tab[:, E.U0],
+                        "K_N_m": tab[:, E.K_]}  # fmt: skip
+    traces = [Trace(x, f, f"t{i}", meta={"lattice_nm": float(ai)})
+              for i, (f, ai) in enumerate(zip(F, a, strict=True))]  # fmt: skip
+    for name, model in mlps.items():
+        est, _ = predict_traces(model, traces)
+        out[name] = {k: np.array([e.values[k] for e in est]) for k in KEYS}
+    t0 = time.perf_counter()
+    lp = predict_raw_lines(line_model, [x] * len(F), list(F), a, v)
+    out["line CNN"] = {**lp.values, "_lp": lp, "_seconds": time.perf_counter() - t0}
+    return out
+
+
+def score(truth, pred, mask) -> dict[str, float]:
+    r = {"F_rmse": float(np.sqrt(np.nanmean((pred["F_mean_nN"] - truth["F_mean_nN"])[mask] ** 2)))}
+    for k in ("U0_eV", "K_N_m"):
+        rel = (pred[k] / truth[k] - 1)[mask]
+        r[f"{k}_rel_rmse"] = float(np.sqrt(np.nanmean(rel**2)))
+        r[f"{k}_rmse"] = float(np.sqrt(np.nanmean((pred[k] - truth[k])[mask] ** 2)))
+        r[f"{k}_failed"] = int(np.sum(~np.isfinite(rel)))
+    lp = pred.get("_lp")
+    if lp is not None:
+        for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta"):
+            r[f"{k}_cov68"] = coverage(truth[k][mask], lp.lo68[k][mask], lp.hi68[k][mask])
+            r[f"{k}_cov95"] = coverage(truth[k][mask], lp.lo95[k][mask], lp.hi95[k][mask])
+    return r
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", type=Path, default=ROOT / "build" / "lab-bench")
+    ap.add_argument("--n-per-material", type=int, default=200)
+    ap.add_argument("--n-clean", type=int, default=300)
+    ap.add_argument("--line-model", type=Path, default=None)
+    ap.add_argument("--epochs", type=int, default=50)
+    args = ap.parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
+          f"python {platform.python_version()}")  # fmt: skip
+
+    from stickslip.learning.line_model import load_line_model
+
+    line_model = load_line_model(args.line_model)
+    mlps = {f"MLP {r}": window_model(args.work, r, args.epochs) for r in ("raw", "pi")}
+    bench_path = args.work / f"bench_{args.n_per_material}.h5"
+    if not bench_path.exists():
+        make_bench(BenchConfig(n_per_material=args.n_per_material), bench_path)
+    sets = {"clean": load_dataset(sweep_if_missing(args.work / "clean.h5", args.n_clean, 4242)),
+            "bench": load_dataset(bench_path)}  # fmt: skip
+    summary: dict = {}
+    for set_name, ds in sets.items():
+        truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
+        ok = (truth["eta"] >= 1.5) & (truth["eta"] <= 40)
+        preds = predictions(ds, line_model, mlps)
+        groups = {set_name: ok}
+        if set_name == "bench":
+            for m, mat in enumerate(MATERIALS):
+                groups[f"bench {mat}"] = ok & (ds.params["material"] == m)
+        for g, mask in groups.items():
+            print(f"\n{g}: {int(mask.sum())} traces with 1.5 <= eta <= 40")
+            print(f"{'estimator':<12}{'<F> RMSE nN':>13}{'U0 rel RMSE':>13}{'K rel RMSE':>12}"
+                  f"{'U0 RMSE eV':>12}{'K RMSE N/m':>12}{'cov68 U0/K':>13}{'cov95 U0/K':>13}")
+            for est, pred in preds.items():
+                s = score(truth, pred, mask)
+                summary.setdefault(g, {})[est] = s
+                cov = ""
+                if "U0_eV_cov68" in s:
+                    cov = (f"{s['U0_eV_cov68']:>6.2f}/{s['K_N_m_cov68']:.2f}"
+                           f"{s['U0_eV_cov95']:>8.2f}/{s['K_N_m_cov95']:.2f}")  # fmt: skip
+                print(f"{est:<12}{s['F_rmse']:>13.4f}{s['U0_eV_rel_rmse']:>13.2%}"
+                      f"{s['K_N_m_rel_rmse']:>12.2%}{s['U0_eV_rmse']:>12.3f}{s['K_N_m_rmse']:>12.2f}"
+                      f"   {cov}")  # fmt: skip
+        lp = preds["line CNN"]["_lp"]
+        rate = len(ds.force_nN) / preds["line CNN"]["_seconds"]
+        print(f"line CNN inference incl. mapping: {rate:.0f} traces/s")
+        curves = {}
+        for k, log in (("F_mean_nN", False), ("U0_eV", True), ("K_N_m", True), ("eta", True)):
+            sig = (np.log(lp.hi95[k]) - np.log(lp.values[k])) / Z95 if log else lp.std[k]
+            loc = np.log(lp.values[k]) if log else lp.values[k]
+            curves[k] = reliability(truth[k][ok], loc[ok], sig[ok], log)
+        reliability_plot(curves, f"line CNN calibration: {set_name}",
+                         args.work / f"calibration_{set_name}.png")  # fmt: skip
+    (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"\nwrote {args.work / 'summary.json'} and calibration plots")
+
+
+if __name__ == "__main__":
+    main()

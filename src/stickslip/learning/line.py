@@ -1,0 +1,238 @@
+"""Whole-line models: a 1D CNN over the mapped trace with Gaussian heads, and ensembles.
+
+Where the paper's MLP reads windows of a trace, these models read the whole line.
+
+Input. A trace on lattice ``a`` is mapped onto the reference lattice ``a0`` exactly as
+for the window models (:mod:`stickslip.learning.inference`): positions divided by
+``s = a / a0``, forces unchanged, then resampled (pixel means) onto the reference pixel,
+so a lattice period always spans the same number of pixels. The network sees two
+channels, the force and its pixel-to-pixel difference, plus two conditioning scalars
+(``s - 1`` and ``ln(v / v0)``), so that thermal activation, which the mapping does not
+carry over, is learned rather than ignored. Any line of at least ``min_pixels`` works:
+global average and max pooling make the network length-agnostic.
+
+Output. For each target (``F_mean_nN`` as a correction to the trace's own mean, which
+is exact on a clean line but carries any offset drift; ``ln U0'``, ``ln K'``, ``ln eta``
+with ``U0 = U0' s`` and ``K = K' / s``) a mean and a log-variance in standardised units:
+trained with the Gaussian negative log-likelihood, each member reports how sure it is.
+An ensemble of members gives the predictive mean and variance (mean of the members'
+variances plus the variance of their means); a per-target scale factor fitted on
+held-out simulations calibrates it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from stickslip.learning.features import resample_mean
+
+TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
+Z68, Z95 = 0.994458, 1.959964  # two-sided 68.27 % and 95 % Gaussian quantiles
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    """How a trace becomes a line-model input (saved in the model file)."""
+
+    lattice_nm: float = 0.246
+    pixel_nm: float = 11.0 / 512
+    velocity_nm_per_s: float = 60.0
+    temperature_K: float = 296.0
+    force_scale_nN: float = 5.0
+    slope_scale_nN: float = 1.0
+    crop: int = 352
+    min_pixels: int = 64
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def map_line(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float, spec: LineSpec):
+    """Mapped, resampled line on the reference lattice and pixel (1-D array)."""
+    s = float(lattice_nm) / spec.lattice_nm
+    return resample_mean(np.asarray(x_nm, float) / s, np.asarray(force_nN, float), spec.pixel_nm)
+
+
+def line_inputs(lines: list[np.ndarray], spec: LineSpec, length: int | None = None,
+                rng: np.random.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """Stack lines into a (B, 2, L) tensor: scaled force and scaled pixel difference.
+
+    ``length`` (default: the shortest line) is the window taken from each line: a random
+    crop when ``rng`` is given (training), else the centred one. Lines shorter than it
+    are padded by repeating them periodically (a stick-slip line is nearly periodic).
+    """
+    L = min(f.size for f in lines) if length is None else int(length)
+    X = np.empty((len(lines), 2, L), np.float32)
+    for i, f in enumerate(lines):
+        if f.size < L:
+            f = np.resize(f, L)
+        start = (f.size - L) // 2 if rng is None else int(rng.integers(0, f.size - L + 1))
+        w = f[start : start + L]
+        X[i, 0] = w / spec.force_scale_nN
+        X[i, 1, 0] = 0.0
+        X[i, 1, 1:] = np.diff(w) / spec.slope_scale_nN
+    return torch.from_numpy(X)
+
+
+def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
+    """Conditioning scalars (B, 2): lattice ratio - 1 and ln of the velocity ratio."""
+    s = np.asarray(lattice_nm, float) / spec.lattice_nm - 1.0
+    lv = np.log(np.asarray(velocity_nm_per_s, float) / spec.velocity_nm_per_s)
+    return torch.from_numpy(np.column_stack(np.broadcast_arrays(s, lv)).astype(np.float32))
+
+
+class LineCNN(nn.Module):
+    """Strided 1D CNN, global mean+max pooling, conditioning, Gaussian heads."""
+
+    def __init__(self, channels=(16, 32, 48, 64), n_cond: int = 2, n_targets: int = 4,
+                 hidden: int = 128):  # fmt: skip
+        super().__init__()
+        layers: list[nn.Module] = []
+        cin = 2
+        for i, c in enumerate(channels):
+            k = 7 if i == 0 else 5
+            layers += [nn.Conv1d(cin, c, k, stride=2, padding=k // 2), nn.BatchNorm1d(c),
+                       nn.ReLU()]  # fmt: skip
+            cin = c
+        self.body = nn.Sequential(*layers)
+        self.head = nn.Sequential(
+            nn.Linear(2 * cin + n_cond, hidden), nn.ReLU(), nn.Linear(hidden, 2 * n_targets)
+        )
+        self.n_targets = n_targets
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = self.body(x)
+        h = torch.cat([h.mean(-1), h.amax(-1), cond], dim=1)
+        out = self.head(h)
+        mean, log_var = out[:, : self.n_targets], out[:, self.n_targets :]
+        return mean, log_var.clamp(-12.0, 6.0)
+
+
+def gaussian_nll(mean, log_var, y, beta: float = 0.5) -> torch.Tensor:
+    """beta-NLL (Seitzer et al. 2022): NLL weighted by var^beta, so the means of
+    hard examples are still learned. Summed over targets, averaged over the batch."""
+    nll = 0.5 * (log_var + (y - mean) ** 2 / log_var.exp())
+    if beta:
+        nll = nll * log_var.detach().exp() ** beta
+    return nll.sum(dim=1).mean()
+
+
+@dataclass
+class LineEnsemble:
+    """Members, target normalisation and the calibration of their predictive spread."""
+
+    members: list[LineCNN]
+    spec: LineSpec
+    y_mean: np.ndarray
+    y_std: np.ndarray
+    scale: np.ndarray = field(default_factory=lambda: np.ones(len(TARGETS)))
+
+    @torch.inference_mode()
+    def predict_std(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Predictive mean and std in standardised target units (B, n_targets)."""
+        means, variances = [], []
+        for m in self.members:
+            m.eval()
+            mu, lv = m(X, C)
+            means.append(mu.numpy())
+            variances.append(lv.exp().numpy())
+        means_a = np.stack(means)
+        var = np.mean(variances, axis=0) + means_a.var(axis=0)
+        return means_a.mean(axis=0), np.sqrt(var) * self.scale
+
+    def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
+        mu, sd = self.predict_std(X, C)
+        return mu * self.y_std + self.y_mean, sd * self.y_std
+
+
+@dataclass
+class LinePrediction:
+    """Estimates for N traces with uncertainty (arrays of length N).
+
+    ``values[name]`` is the predictive mean (median for the log-normal U0, K, eta),
+    ``std[name]`` its standard deviation, ``lo68/hi68`` and ``lo95/hi95`` the central
+    68 % and 95 % intervals, for name in ``F_mean_nN, U0_eV, K_N_m, eta``.
+    """
+
+    values: dict[str, np.ndarray]
+    std: dict[str, np.ndarray]
+    lo68: dict[str, np.ndarray]
+    hi68: dict[str, np.ndarray]
+    lo95: dict[str, np.ndarray]
+    hi95: dict[str, np.ndarray]
+
+
+def predict_lines(
+    ens: LineEnsemble,
+    lines: list[np.ndarray],
+    lattice_nm: np.ndarray,
+    velocity_nm_per_s: np.ndarray,
+    trace_mean_nN: np.ndarray,
+    batch: int = 2048,
+) -> LinePrediction:
+    """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity.
+
+    ``trace_mean_nN`` is each trace's own mean force (on its original samples), to which
+    the predicted friction correction is added. Lines of equal length are batched
+    together; each is read whole (no crop).
+    """
+    n = len(lines)
+    mu = np.empty((n, len(TARGETS)))
+    sd = np.empty((n, len(TARGETS)))
+    sizes = np.array([f.size for f in lines])
+    a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
+    v = np.broadcast_to(np.asarray(velocity_nm_per_s, float), (n,))
+    for size in np.unique(sizes):
+        idx = np.flatnonzero(sizes == size)
+        for start in range(0, idx.size, batch):
+            sel = idx[start : start + batch]
+            X = line_inputs([lines[i] for i in sel], ens.spec)
+            C = conditioning(a[sel], v[sel], ens.spec)
+            mu[sel], sd[sel] = ens.predict(X, C)
+    s = a / ens.spec.lattice_nm
+    shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
+    out = LinePrediction({}, {}, {}, {}, {}, {})
+    for j, name in enumerate(("F_mean_nN", "U0_eV", "K_N_m", "eta")):
+        m, e = mu[:, j], sd[:, j]
+        if name == "F_mean_nN":
+            m = m + np.asarray(trace_mean_nN, float)
+            out.values[name], out.std[name] = m, e
+            out.lo68[name], out.hi68[name] = m - Z68 * e, m + Z68 * e
+            out.lo95[name], out.hi95[name] = m - Z95 * e, m + Z95 * e
+            continue
+        m = m + shift[name]
+        out.values[name] = np.exp(m)
+        # standard deviation of the log-normal
+        out.std[name] = np.exp(m) * np.sqrt(np.expm1(e**2) * np.exp(e**2))
+        out.lo68[name], out.hi68[name] = np.exp(m - Z68 * e), np.exp(m + Z68 * e)
+        out.lo95[name], out.hi95[name] = np.exp(m - Z95 * e), np.exp(m + Z95 * e)
+    return out
+
+
+def predict_raw_lines(
+    ens: LineEnsemble,
+    x_nm: list[np.ndarray],
+    force_nN: list[np.ndarray],
+    lattice_nm: np.ndarray,
+    velocity_nm_per_s: np.ndarray,
+) -> LinePrediction:
+    """Map traces of any pixel size and lattice (see :func:`map_line`), then predict.
+
+    Raises
+    ------
+    ValueError
+        If a mapped trace has fewer than ``spec.min_pixels`` pixels.
+    """
+    n = len(force_nN)
+    a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
+    lines = [map_line(x, f, ai, ens.spec) for x, f, ai in zip(x_nm, force_nN, a, strict=True)]
+    short = [i for i, f in enumerate(lines) if f.size < ens.spec.min_pixels]
+    if short:
+        raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
+    means = np.array([np.mean(f) for f in force_nN])
+    return predict_lines(ens, lines, a, velocity_nm_per_s, means)

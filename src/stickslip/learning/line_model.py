@@ -1,0 +1,111 @@
+"""The line-model file: an ensemble of whole-line CNNs with everything inference needs.
+
+Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
+
+    format              "stickslip-line-model-1"
+    stickslip_version   version of the package that trained it
+    spec                LineSpec as a dict (reference lattice, pixel, scales, crop)
+    channels            CNN channels
+    members             list of state_dicts, one per ensemble member
+    y_mean, y_std       target normalisation (training set)
+    scale               calibration of the predictive spread, per target
+    train_config        LineTrainConfig as a dict
+    dataset             description and fingerprint of the training data
+    metrics             validation metrics recorded at training time
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from stickslip import __version__
+from stickslip.data.atomic import atomic_path
+from stickslip.learning.line import TARGETS, LineCNN, LineEnsemble, LineSpec
+from stickslip.learning.modelfile import ModelFileError, _major, _plain
+
+FORMAT = "stickslip-line-model-1"
+BUNDLED = "line_model.pt"
+
+
+def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[int, ...],
+                    train_config: dict, dataset: dict, metrics: dict) -> Path:  # fmt: skip
+    """Write the ensemble and its provenance atomically; returns the path."""
+    payload: dict[str, Any] = {
+        "format": FORMAT,
+        "stickslip_version": __version__,
+        "spec": ens.spec.to_dict(),
+        "channels": list(channels),
+        "members": [{k: v.detach().cpu() for k, v in m.state_dict().items()}
+                    for m in ens.members],  # fmt: skip
+        "y_mean": torch.as_tensor(np.asarray(ens.y_mean, np.float64)),
+        "y_std": torch.as_tensor(np.asarray(ens.y_std, np.float64)),
+        "scale": torch.as_tensor(np.asarray(ens.scale, np.float64)),
+        "train_config": _plain(train_config),
+        "dataset": _plain(dataset),
+        "metrics": _plain(metrics),
+    }
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def line_from_payload(payload: Any, name: str) -> LineEnsemble:
+    """Rebuild a :class:`LineEnsemble` from a loaded payload, checking its format."""
+    made_by = str(payload.get("stickslip_version", "unknown"))
+    if payload.get("format") != FORMAT or _major(made_by) != _major(__version__):
+        raise ModelFileError(
+            f"{name}: model format '{payload.get('format')}' from stickslip {made_by} cannot "
+            f"be read by stickslip {__version__} ({FORMAT})"
+        )
+    try:
+        spec = LineSpec(**payload["spec"])
+        members = []
+        for sd in payload["members"]:
+            net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS))
+            net.load_state_dict(sd)
+            net.eval()
+            members.append(net)
+        return LineEnsemble(
+            members=members,
+            spec=spec,
+            y_mean=payload["y_mean"].numpy(),
+            y_std=payload["y_std"].numpy(),
+            scale=payload["scale"].numpy(),
+        )
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ModelFileError(f"{name}: damaged model file ({reason})") from None
+
+
+def line_metadata(path: str | os.PathLike) -> dict:
+    """Training config, data description and metrics stored in a line-model file."""
+    p = torch.load(path, map_location="cpu", weights_only=True)
+    return {k: p.get(k) for k in ("train_config", "dataset", "metrics", "stickslip_version")}
+
+
+def load_line_model(path: str | os.PathLike | None = None) -> LineEnsemble:
+    """Load a line-model file, or the bundled one when ``path`` is None.
+
+    Raises
+    ------
+    ModelFileError
+        One line: missing, corrupt, not a line model, or from an incompatible version.
+    """
+    if path is None:
+        from importlib.resources import as_file, files
+
+        ref = files("stickslip").joinpath("resources", BUNDLED)
+        if not ref.is_file():
+            raise ModelFileError("the bundled line model is missing from this installation")
+        with as_file(ref) as p:
+            return load_line_model(p)
+    from stickslip.learning.modelfile import read_payload
+
+    p = Path(path)
+    return line_from_payload(read_payload(p), str(p))

@@ -1,0 +1,99 @@
+"""Domain-randomised training sets: many lattices, velocities and substrates.
+
+Parameters are drawn in the reference frame (lattice a0 = 0.246 nm) over a range a bit
+wider than the paper's, each trajectory then gets a lattice spacing ``a`` (uniform over
+``lattice_nm``) with ``U0 = U0_ref (a / a0)^2`` (same eta), a scan velocity from
+``velocities_nm_per_s`` (a few discrete values: one simulator call per velocity), and
+an augmented substrate (modulation and defects) for all but ``clean_fraction`` of them.
+Detector effects are not simulated here: the training pipeline adds them on the fly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from stickslip import __version__
+from stickslip.data.dataset import create_dataset_file, write_rows
+from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
+from stickslip.simulation.sampling import sample_parameters, sample_substrate
+from stickslip.simulation.simulate import simulate
+from stickslip.units import eta_from
+
+A_REF_NM = 0.246
+
+
+@dataclass(frozen=True)
+class RandomisedConfig:
+    """Everything that defines a randomised training set (stored in its file)."""
+
+    n: int = 4000
+    seed: int = 101
+    ranges: ParameterRange = field(
+        default_factory=lambda: ParameterRange(U0_eV=(0.15, 6.5), K_N_m=(1.0, 55.0),
+                                               eta=(1.2, 42.0))  # fmt: skip
+    )
+    lattice_nm: tuple[float, float] = (0.235, 0.335)
+    velocities_nm_per_s: tuple[float, ...] = (30.0, 45.0, 60.0, 90.0)
+    temperature_K: float = 296.0
+    substrate: SubstrateAugmentation = field(
+        default_factory=lambda: SubstrateAugmentation(
+            modulation_amplitude=(0.0, 0.35),
+            modulation_wavelength_nm=(3.0, 35.0),
+            defects_per_line=(0, 4),
+            defect_height=(-0.35, 0.35),
+            defect_width_nm=(0.08, 0.6),
+        )
+    )
+    clean_fraction: float = 0.25
+    chunk: int = 500
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+
+
+def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
+                        progress: bool = True) -> Path:  # fmt: skip
+    """Simulate the set into ``out`` (dataset layout of :mod:`stickslip.data.dataset`)."""
+    out = Path(out)
+    rng = np.random.default_rng([config.seed, 31])
+    n = config.n
+    U0_ref, K = sample_parameters(config.ranges, n, config.seed, A_REF_NM)
+    a = rng.uniform(*config.lattice_nm, n)
+    U0 = U0_ref * (a / A_REF_NM) ** 2
+    v = rng.choice(np.asarray(config.velocities_nm_per_s, float), n)
+    sub = sample_substrate(config.substrate, n, config.seed, span_nm=16.0)
+    clean = rng.random(n) < config.clean_fraction
+    sub.mod_amplitude[clean] = 0.0
+    sub.defect_height[clean] = 0.0
+    physics = PhysicalSettings(temperature_K=config.temperature_K)
+    table = {
+        "index": np.arange(n), "U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, a),
+        "F_mean_nN": np.full(n, np.nan), "lattice_nm": a, "velocity_nm_per_s": v,
+        "temperature_K": np.full(n, config.temperature_K), "mod_amplitude": sub.mod_amplitude,
+        "defect_count": np.count_nonzero(sub.defect_height, axis=1),
+    }  # fmt: skip
+    x_nm = np.arange(physics.pixels) * physics.pixel_nm
+    attrs = {"config": config.to_json(), "seed": config.seed, "stickslip_version": __version__,
+             "n": n, "pixels": physics.pixels, "kind": "randomised"}  # fmt: skip
+    part = out.with_name(out.name + ".partial")
+    create_dataset_file(part, n, x_nm, table, attrs)
+    for s in tqdm(range(0, n, config.chunk), desc=f"simulate {out.name}", disable=not progress):
+        rows = np.arange(s, min(s + config.chunk, n))
+        res = simulate(
+            U0[rows], K[rows], physics, seed=config.seed, indices=rows, lattice_nm=a[rows],
+            velocity_nm_per_s=v[rows],
+            modulation=(sub.mod_amplitude[rows], sub.mod_wavelength_nm[rows],
+                        sub.mod_phase_rad[rows]),
+            defects=(sub.defect_x_nm[rows], sub.defect_height[rows], sub.defect_width_nm[rows]),
+        )  # fmt: skip
+        write_rows(part, rows, res.force_nN, res.support_nm,
+                   {"F_mean_nN": res.force_nN.mean(axis=1)})  # fmt: skip
+    os.replace(part, out)
+    return out
