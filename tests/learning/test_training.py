@@ -46,6 +46,8 @@ def trained(small_sweep):
 def test_small_training_beats_the_trivial_baseline(trained, small_sweep):
     model, hist, val_idx = trained
     assert len(hist.train_loss) == 15 and hist.train_loss[-1] < hist.train_loss[0]
+    # the kept weights are those of the best validation epoch
+    assert model.train_config["best_epoch"] == 1 + int(np.argmin(hist.val_loss))
     ev = evaluate_model(model, small_sweep, val_idx)
     train_idx = np.setdiff1d(np.arange(small_sweep.n), val_idx)
     for k in ("U0_eV", "K_N_m"):
