@@ -100,3 +100,10 @@ def test_demo_runs(tmp_path):
     rows = list(csv.DictReader((tmp_path / "demo" / "results.csv").open()))
     assert len(rows) == 6
     assert len(list((tmp_path / "demo" / "plots").glob("*.png"))) == 6
+
+
+def test_infer_reader_options_are_checked(traces, tmp_path):
+    r = _run(["infer", traces, "--loads", "1,2", "--out", tmp_path / "r.csv"])
+    assert r.exit_code == 2 and "lines-per-load" in r.stderr
+    r = _run(["infer", traces, "--lattice", -1, "--out", tmp_path / "r.csv"])
+    assert r.exit_code == 2 and len(_errors(r)) == 1

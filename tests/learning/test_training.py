@@ -78,3 +78,7 @@ def test_trace_path_matches_array_path_and_lattice_mapping(trained, small_sweep)
     assert [e.trace for e in ests] == ["t0"] and failures[0][0] == "short"
     assert "too short" in failures[0][1]
     assert map_trace(small_sweep.x_nm, f[0], model, None).size == 512
+    # a micron-scale line does not resolve the lattice: reported, not upsampled
+    coarse = Trace(np.arange(512) * 10.0, f[0], "coarse")
+    _, failures = predict_traces(model, [coarse])
+    assert "does not resolve" in failures[0][1]

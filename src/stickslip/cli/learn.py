@@ -93,6 +93,12 @@ def infer_cmd(
     calibration: float | None = typer.Option(
         None, "--calibration", help="Lateral calibration in nN/V for force channels in volts."
     ),
+    lines_per_load: int | None = typer.Option(
+        None, "--lines-per-load", help="Consecutive scan lines recorded at one load."
+    ),
+    loads: str | None = typer.Option(
+        None, "--loads", help="Comma-separated loads of the line groups (with --lines-per-load)."
+    ),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for per-trace panels."),
     classical: bool = typer.Option(
         True, "--classical/--no-classical", help="Add the classical estimator's columns."
@@ -111,10 +117,16 @@ def infer_cmd(
             usage_error(f"{name} must be > 0")
     if temperature is not None and temperature < 0:
         usage_error("--temperature must be >= 0 K")
+    from stickslip.data.formats.maps import parse_loads, reader_options
+
+    try:
+        opts = reader_options(calibration, lines_per_load, parse_loads(loads))
+    except ValueError as e:
+        usage_error(str(e))
     m = _load_model(model)
     failed = infer_job(
         m, traces, out, plots, lattice_nm=lattice, velocity_nm_per_s=velocity,
-        temperature_K=temperature, calibration_nN_per_V=calibration, classical=classical,
+        temperature_K=temperature, reader_options=opts, classical=classical,
         echo=typer.echo, warn=error, note=info,
     )  # fmt: skip
     raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)

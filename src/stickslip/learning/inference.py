@@ -42,6 +42,7 @@ from stickslip.units import eta_from
 OUTPUTS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
 CHUNK_WINDOWS = 1 << 16
 PIXEL_TOLERANCE = 1e-3  # relative pixel-size mismatch below which no resampling is done
+MAX_PIXEL_RATIO = 4.0  # coarser pixels (under ~3 per lattice spacing) cannot be read
 
 
 @dataclass
@@ -166,13 +167,20 @@ def map_trace(
     Raises
     ------
     FeatureError
-        If the mapped trace is shorter than one window.
+        If the mapped trace is shorter than one window, or its pixels are more than
+        4x the training pixel (fewer than ~3 pixels per lattice spacing).
     """
     spec = model.features
     s = (spec.lattice_nm if lattice_nm is None else float(lattice_nm)) / spec.lattice_nm
     x = np.asarray(x_nm, dtype=float) / s
     f = np.asarray(force_nN, dtype=float)
     pixel = (x[-1] - x[0]) / max(x.size - 1, 1)
+    if pixel > MAX_PIXEL_RATIO * spec.pixel_nm:
+        a = spec.lattice_nm * s
+        raise FeatureError(
+            f"pixel {pixel * s:.3g} nm does not resolve the {a:.3g} nm lattice (the model "
+            f"needs pixels <= {MAX_PIXEL_RATIO * spec.pixel_nm * s:.3g} nm)"
+        )
     uniform = np.allclose(np.diff(x), pixel, rtol=1e-3, atol=0)
     if not (uniform and abs(pixel / spec.pixel_nm - 1) < PIXEL_TOLERANCE):
         f = resample_mean(x, f, spec.pixel_nm)

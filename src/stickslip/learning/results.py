@@ -24,6 +24,7 @@ from stickslip.learning.modelfile import TrainedModel
 
 COLUMNS = ("trace", *OUTPUTS, *(f"{k}_std" for k in OUTPUTS), "n_windows", "F_mean_net",
            "lattice_nm", "source")  # fmt: skip
+META_COLUMNS = ("direction", "line", "load", "load_unit")  # from map readers, where known
 CLASSICAL = ("F_mean_nN", "U0_eV", "K_N_m", "eta", "regime", "quality")
 
 
@@ -102,6 +103,7 @@ def run_inference(
         row["n_windows"] = e.n_windows
         row["lattice_nm"] = a[e.index]
         row["source"] = getattr(traces[e.index], "source", "")
+        row.update({k: e.meta[k] for k in META_COLUMNS if e.meta.get(k) is not None})
         if extra:
             row.update({f"classical_{k}": v for k, v in extra[e.index].items()})
         rows.append(row)

@@ -39,7 +39,7 @@ def infer_job(
     lattice_nm: float | None = None,
     velocity_nm_per_s: float | None = None,
     temperature_K: float | None = None,
-    calibration_nN_per_V: float | None = None,
+    reader_options: dict[str, Any] | None = None,
     classical: bool = True,
     echo: Echo = print,
     warn: Echo = print,
@@ -54,10 +54,9 @@ def infer_job(
     """
     from stickslip.data.trace import collect_traces
 
-    opts = {"calibration_nN_per_V": calibration_nN_per_V} if calibration_nN_per_V else {}
     errors: list[Any] = []
     if traces is None:
-        traces, errors = collect_traces(list(paths), **opts)
+        traces, errors = collect_traces(list(paths), **(reader_options or {}))
     for e in errors:
         warn(str(e))
     res = run_inference(model, traces, lattice_nm, velocity_nm_per_s, temperature_K,
