@@ -83,14 +83,17 @@ def test_spec_rejects_bad_settings_and_round_trips():
     assert FeatureSpec.from_dict(spec.to_dict()) == spec
 
 
-def test_resample_mean_preserves_lines_and_means():
-    x = np.linspace(0, 10, 501)
-    f = 3.0 + 0.5 * x
-    out = resample_mean(x, f, 0.5)
-    assert out.size == 20
-    # the mean of a straight line over [x0 + i d, x0 + (i+1) d] is its value at the middle
-    np.testing.assert_allclose(out, 3.0 + 0.5 * (np.arange(20) + 0.5) * 0.5, rtol=1e-12)
-    g = np.sin(x)
-    same = resample_mean(x, g, 0.02)
-    # on its own grid the pixel mean is the mean of neighbouring samples
-    np.testing.assert_allclose(same, 0.5 * (g[1:] + g[:-1]), atol=1e-12)
+def test_resample_mean_is_a_pixel_mean():
+    x = np.arange(500) * 0.02
+    f = np.sin(x) + 0.1 * x
+    # on its own grid: unchanged; on a grid of pixel pairs: the mean of each pair
+    np.testing.assert_allclose(resample_mean(x, f, 0.02), f, atol=1e-12)
+    np.testing.assert_allclose(resample_mean(x, f, 0.04), 0.5 * (f[0::2] + f[1::2]), atol=1e-12)
+    # the integral of the line is kept whatever the new pixel (300 x 0.03 = 450 x 0.02)
+    out = resample_mean(x, f, 0.03)
+    assert out.size == 333
+    np.testing.assert_allclose(out[:300].sum() * 0.03, f[:450].sum() * 0.02, rtol=1e-12)
+    # a step between recorded pixels stays a step of the same height
+    step = resample_mean(x, np.where(x < 5.0, 0.0, 2.0), 0.05)
+    assert set(np.round(step, 9)) <= {0.0, 0.8, 2.0} and step[0] == 0
+    assert step[-1] == pytest.approx(2.0)

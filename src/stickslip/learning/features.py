@@ -151,22 +151,21 @@ def window_features(win: np.ndarray, spec: FeatureSpec) -> np.ndarray:
 
 
 def resample_mean(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float) -> np.ndarray:
-    """Resample a trace onto pixels of ``pixel_nm``, each the mean force over its travel.
+    """Resample a recorded line onto pixels of ``pixel_nm``, each the mean force over its travel.
 
-    The trace is taken as piecewise linear between its samples; each new pixel is the
-    exact mean of that curve over ``[x0 + i d, x0 + (i + 1) d]`` (like a recorded AFM
-    pixel, which averages the force over its travel window). Pixels that would run past
-    the last sample are dropped.
+    A recorded sample ``i`` is the mean force over its pixel's travel ``[x_i, x_{i+1}]``
+    (the last one as wide as its predecessor), which fixes the integral of the force over
+    every union of pixels. The new pixel ``[x_0 + j d, x_0 + (j + 1) d]`` gets the mean of
+    that integral, taking the force as constant inside each recorded pixel (exact
+    wherever a new pixel edge falls on a recorded one). Pixels that would run past the
+    line are dropped.
     """
     x = np.asarray(x_nm, dtype=float)
     f = np.asarray(force_nN, dtype=float)
-    n_new = int(np.floor((x[-1] - x[0]) / pixel_nm + 1e-9))
+    edges = np.append(x, x[-1] + (x[-1] - x[-2]))
+    n_new = int(np.floor((edges[-1] - edges[0]) / pixel_nm + 1e-9))
     if n_new < 1:
         return np.empty(0)
-    cum = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(x))])
-    edges = x[0] + np.arange(n_new + 1) * pixel_nm
-    idx = np.clip(np.searchsorted(x, edges, side="right") - 1, 0, x.size - 2)
-    t = edges - x[idx]
-    slope = (f[idx + 1] - f[idx]) / (x[idx + 1] - x[idx])
-    integral = cum[idx] + f[idx] * t + 0.5 * slope * t**2
-    return np.diff(integral) / pixel_nm
+    cum = np.concatenate([[0.0], np.cumsum(f * np.diff(edges))])
+    new_edges = edges[0] + np.arange(n_new + 1) * pixel_nm
+    return np.diff(np.interp(new_edges, edges, cum)) / pixel_nm
