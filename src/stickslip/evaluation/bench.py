@@ -104,6 +104,7 @@ def make_bench(config: BenchConfig, out: str | os.PathLike, progress: bool = Tru
         "n": force.shape[0], "pixels": physics.pixels, "kind": "lab-bench",
         "materials": json.dumps(names),
     }  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
     part = out.with_name(out.name + ".partial")
     create_dataset_file(part, force.shape[0], x_nm, table, attrs)
     support = np.broadcast_to(x_nm, force.shape)

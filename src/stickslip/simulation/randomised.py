@@ -52,6 +52,8 @@ class RandomisedConfig:
         )
     )
     clean_fraction: float = 0.25
+    length_nm: float = 11.0
+    pixels: int = 512
     chunk: int = 500
 
     def to_json(self) -> str:
@@ -72,7 +74,8 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     clean = rng.random(n) < config.clean_fraction
     sub.mod_amplitude[clean] = 0.0
     sub.defect_height[clean] = 0.0
-    physics = PhysicalSettings(temperature_K=config.temperature_K)
+    physics = PhysicalSettings(temperature_K=config.temperature_K, length_nm=config.length_nm,
+                               pixels=config.pixels)  # fmt: skip
     table = {
         "index": np.arange(n), "U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, a),
         "F_mean_nN": np.full(n, np.nan), "lattice_nm": a, "velocity_nm_per_s": v,
@@ -82,6 +85,7 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     x_nm = np.arange(physics.pixels) * physics.pixel_nm
     attrs = {"config": config.to_json(), "seed": config.seed, "stickslip_version": __version__,
              "n": n, "pixels": physics.pixels, "kind": "randomised"}  # fmt: skip
+    out.parent.mkdir(parents=True, exist_ok=True)
     part = out.with_name(out.name + ".partial")
     create_dataset_file(part, n, x_nm, table, attrs)
     for s in tqdm(range(0, n, config.chunk), desc=f"simulate {out.name}", disable=not progress):

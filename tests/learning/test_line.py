@@ -1,0 +1,99 @@
+"""Whole-line models: lattice mapping, inputs, uncertainty outputs, files, training."""
+
+import numpy as np
+import pytest
+import torch
+
+from stickslip.data.dataset import load_dataset
+from stickslip.learning.line import (
+    LineCNN,
+    LineEnsemble,
+    LineSpec,
+    line_inputs,
+    map_line,
+    predict_lines,
+)
+from stickslip.learning.line_model import load_line_model, save_line_model
+from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
+from stickslip.learning.modelfile import ModelFileError
+from stickslip.simulation import PhysicalSettings, simulate
+from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+
+
+def test_lattice_mapping_is_exact_in_the_athermal_limit():
+    # (U0, K) on lattice a reads as (U0 a0/a, K a/a0) on a0 once positions are divided
+    # by s = a / a0: same forces, same eta
+    a0, a, U0, K = 0.246, 0.316, 2.0, 12.0
+    s = a / a0
+    cold = PhysicalSettings(temperature_K=0.0)
+    on_a = simulate([U0], [K], cold.replace(lattice_nm=a, warmup_nm=2.0 * s))
+    on_a0 = simulate([U0 / s], [K * s], cold.replace(warmup_nm=2.0))
+    spec = LineSpec()
+    mapped = map_line(on_a.x_nm, on_a.force_nN[0], a, spec)
+    ref = on_a0.force_nN[0, : mapped.size]
+    assert mapped.size == pytest.approx(512 / s, abs=2)
+    assert np.allclose(on_a.eta, on_a0.eta)
+    fmax = np.pi * U0 * 0.1602176634 / a
+    diff = np.abs(mapped[2:-2] - ref[2:-2])
+    # equal stick branches; a slip may land one pixel apart, so compare robustly
+    assert np.median(diff) < 0.01 * fmax
+    assert abs(mapped.mean() / ref.mean() - 1) < 0.01
+    assert abs(mapped.max() / ref.max() - 1) < 0.01
+
+
+def test_line_inputs_crop_and_periodic_padding():
+    spec = LineSpec(crop=100)
+    lines = [np.arange(150.0), np.arange(60.0)]
+    X = line_inputs(lines, spec, length=100, rng=np.random.default_rng(0))
+    assert X.shape == (2, 2, 100)
+    assert torch.allclose(X[1, 0, 60:70] * spec.force_scale_nN, torch.arange(10.0))
+    centred = line_inputs([np.arange(150.0)], spec, length=100)
+    assert centred[0, 0, 0] * spec.force_scale_nN == 25.0
+
+
+def _untrained(members=2):
+    torch.manual_seed(0)
+    return LineEnsemble(members=[LineCNN() for _ in range(members)], spec=LineSpec(),
+                        y_mean=np.array([0.0, 0.5, 2.0, 1.5]),
+                        y_std=np.array([0.05, 0.8, 0.9, 0.9]))  # fmt: skip
+
+
+def test_predictions_carry_ordered_intervals_and_map_back():
+    ens = _untrained()
+    lines = [np.sin(np.linspace(0, 60, 400)) + 2.0 for _ in range(3)]
+    p1 = predict_lines(ens, lines, np.full(3, 0.246), np.full(3, 60.0), np.full(3, 2.0))
+    p2 = predict_lines(ens, lines, np.full(3, 0.316), np.full(3, 60.0), np.full(3, 2.0))
+    for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta"):
+        assert np.all(p1.lo95[k] < p1.lo68[k]) and np.all(p1.lo68[k] < p1.values[k])
+        assert np.all(p1.values[k] < p1.hi68[k]) and np.all(p1.hi68[k] < p1.hi95[k])
+        assert np.all(p1.std[k] > 0)
+    # same mapped input: U0 scales with s, K with 1/s (conditioning differs slightly)
+    s = 0.316 / 0.246
+    assert np.median(p2.values["U0_eV"] / p1.values["U0_eV"]) == pytest.approx(s, rel=0.5)
+
+
+def test_line_model_file_round_trip_and_damage(tmp_path):
+    ens = _untrained()
+    path = save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {"x": 1})
+    back = load_line_model(path)
+    X = line_inputs([np.linspace(0, 3, 300)], ens.spec)
+    C = torch.zeros(1, 2)
+    np.testing.assert_allclose(back.predict(X, C)[0], ens.predict(X, C)[0], rtol=1e-6)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(path.read_bytes()[:500])
+    with pytest.raises(ModelFileError, match="bad.pt"):
+        load_line_model(bad)
+
+
+@pytest.mark.slow
+def test_training_learns_from_randomised_simulations(tmp_path):
+    cfg = RandomisedConfig(n=320, seed=5, length_nm=5.0, pixels=232, chunk=320)
+    data = load_dataset(make_randomised_set(cfg, tmp_path / "r.h5", progress=False))
+    spec = LineSpec(crop=160)
+    tc = LineTrainConfig(members=1, epochs=8, batch_size=32, val_fraction=0.2)
+    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params,
+                                      tc, spec, progress=False)  # fmt: skip
+    # predicting the training mean would give ~100 % relative error on U0 and K here
+    assert report["val_rel_rmse"]["log_U0_ref"] < 0.45
+    assert report["val_rel_rmse"]["log_K_ref"] < 0.45
+    assert 0.85 <= report["val_coverage95"]["log_U0_ref"] <= 1.0
