@@ -41,7 +41,7 @@ def point_density(x: np.ndarray, y: np.ndarray, bins: int = 60) -> np.ndarray:
     if x.size == 0:
         return np.empty(0)
     h, xe, ye = np.histogram2d(x, y, bins=bins)
-    h = gaussian_filter(h, 1.0)
+    h = gaussian_filter(h, 1.0, mode="constant")
     ix = np.clip(np.searchsorted(xe, x, side="right") - 1, 0, bins - 1)
     iy = np.clip(np.searchsorted(ye, y, side="right") - 1, 0, bins - 1)
     return h[ix, iy]
@@ -70,7 +70,7 @@ def parity_plot(
         ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
         m = metrics.get(k, {})
         ax.set_title(f"RMSE {m.get('rmse', np.nan):.3g}, rel {m.get('rel_mean_abs', np.nan):.1%}")
-        ax.set_xlabel(f"true {LABELS.get(k, k)}")
+        ax.set_xlabel(f"true {LABELS.get(k.replace('_net', '_nN'), k)}")
         ax.set_ylabel(f"predicted {LABELS.get(k, k)}")
     if title:
         fig.suptitle(title)
@@ -111,13 +111,14 @@ def window_panels(
     keys = list(window_values)
     fig, axes = plt.subplots(len(keys) + 1, 1, figsize=(7, 1.7 * (len(keys) + 1)), sharex=True)
     for ax, k in zip(axes[:-1], keys, strict=True):
-        ax.plot(centres_nm, window_values[k], "o", ms=3, color="tab:green")
-        mean_key = "F_mean_net" if k == "F_mean_net" else k
-        if mean_key in trace_values:
-            ax.axhline(trace_values[mean_key], ls="--", color="tab:pink", lw=1)
+        ax.plot(centres_nm, window_values[k], "o", ms=3, color="tab:green", label="window")
+        if k in trace_values:
+            ax.axhline(trace_values[k], ls="--", color="tab:pink", lw=1, label="trace (mean)")
         if reference and np.isfinite(reference.get(k, np.nan)):
-            ax.axhline(reference[k], ls=":", color="k", lw=1)
+            ax.axhline(reference[k], ls=":", color="k", lw=1, label="classical")
         ax.set_ylabel(LABELS.get(k, k))
+    handles = {h.get_label(): h for ax in axes[:-1] for h in ax.get_lines()}
+    axes[0].legend(handles=list(handles.values()), loc="upper right", fontsize=7, ncols=3)
     axes[-1].plot(x_nm, force_nN, "-", lw=0.7, color="tab:red")
     axes[-1].set_ylabel("F [nN]")
     axes[-1].set_xlabel("x [nm]")
