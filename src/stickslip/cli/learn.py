@@ -12,11 +12,12 @@ from stickslip.cli.main import app
 MODEL_HELP = "Model file from 'stickslip train' (default: the bundled model)."
 
 
-def _load_model(path: Path | None):
+def _load_model(path: Path | None, any_kind: bool = False):
+    from stickslip.learning.line_model import load_any_model
     from stickslip.learning.modelfile import ModelFileError, load_model
 
     try:
-        return load_model(path)
+        return load_any_model(path) if any_kind else load_model(path)
     except ModelFileError as e:
         usage_error(str(e))
 
@@ -103,12 +104,19 @@ def infer_cmd(
     classical: bool = typer.Option(
         True, "--classical/--no-classical", help="Add the classical estimator's columns."
     ),
+    check: bool = typer.Option(
+        False, "--check", help="Line models: re-simulate each trace at its estimate and report"
+        " a goodness of fit (gof, ppc_flag); with --plots the overlay is drawn."
+    ),
 ) -> None:
     """Estimate <F>, U0, K and eta of each trace with a trained network.
 
-    One row per trace: mean over its windows, spread over windows (*_std), window
-    count, and the classical estimator's values (classical_*). Unreadable or too-short
-    traces are reported one line each; the others are processed (exit code 1).
+    Default model: the bundled whole-line CNN ensemble, one row per trace with the
+    estimates, their standard deviations (*_std) and 68 % / 95 % intervals (*_lo68,
+    *_hi68, *_lo95, *_hi95). With a window model (--model from 'stickslip train'): mean
+    over windows, spread over windows (*_std) and window count. The classical
+    estimator's values are beside them (classical_*). Unreadable or too-short traces
+    are reported one line each; the others are processed (exit code 1).
     """
     from stickslip.learning.workflow import infer_job
 
@@ -123,11 +131,11 @@ def infer_cmd(
         opts = reader_options(calibration, lines_per_load, parse_loads(loads))
     except ValueError as e:
         usage_error(str(e))
-    m = _load_model(model)
+    m = _load_model(model, any_kind=True)
     failed = infer_job(
         m, traces, out, plots, lattice_nm=lattice, velocity_nm_per_s=velocity,
         temperature_K=temperature, reader_options=opts, classical=classical,
-        echo=typer.echo, warn=error, note=info,
+        echo=typer.echo, warn=error, note=info, check=check,
     )  # fmt: skip
     raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)
 

@@ -43,12 +43,16 @@ def label_rows(
         for k, v in est.meta.items():
             if k not in meta_keys and k not in SKIPPED_META and isinstance(v, str | int | float):
                 meta_keys.append(k)
-    header = [*COLUMNS, *STD_COLUMNS, *meta_keys]
+    own = {*COLUMNS, *STD_COLUMNS}
+    # a trace's metadata may carry values under the same names (a simulated dataset
+    # stores its true U0_eV, K_N_m ...): keep them, prefixed, never over the estimates
+    meta_col = {k: f"meta_{k}" if k in own else k for k in meta_keys}
+    header = [*COLUMNS, *STD_COLUMNS, *meta_col.values()]
     rows = []
     for est in estimates:
         d = est.as_dict()
         row = {c: _fmt(d[c]) for c in (*COLUMNS, *STD_COLUMNS)}
-        row.update({k: _fmt(est.meta[k]) for k in meta_keys if k in est.meta})
+        row.update({meta_col[k]: _fmt(est.meta[k]) for k in meta_keys if k in est.meta})
         rows.append(row)
     for err in errors:
         rows.append({"trace": Path(err.path).stem, "quality": err.reason})

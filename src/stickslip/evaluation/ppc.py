@@ -150,7 +150,7 @@ def posterior_predictive_check(
 
 
 def plot_overlay(x_nm, force_nN, replicate_nN, title: str, out) -> None:
-    """Observed trace and one replicate at the estimate, one above the other."""
+    """The trace and, if given, one replicate simulated at its estimate."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -160,7 +160,8 @@ def plot_overlay(x_nm, force_nN, replicate_nN, title: str, out) -> None:
 
     fig, ax = plt.subplots(figsize=(8, 3.2), constrained_layout=True)
     ax.plot(x_nm, force_nN, lw=0.9, label="measured")
-    ax.plot(x_nm, replicate_nN, lw=0.9, alpha=0.8, label="PT model at estimate")
+    if replicate_nN is not None:
+        ax.plot(x_nm, replicate_nN, lw=0.9, alpha=0.8, label="PT model at estimate")
     ax.set_xlabel("x [nm]")
     ax.set_ylabel("F [nN]")
     ax.set_title(title, fontsize=9)

@@ -141,10 +141,13 @@ def write_results(rows: Sequence[dict[str, Any]], path: str | os.PathLike) -> Pa
 
 
 def format_rows(rows: Sequence[dict[str, Any]], truth: dict[str, dict] | None = None) -> str:
-    """A compact terminal table (network estimates +- window spread, classical beside)."""
+    """A compact terminal table (estimates +- their spread, classical beside; for line
+    models the goodness of fit, '!' where the check flags the trace)."""
     has_cl = any("classical_U0_eV" in r for r in rows)
     w = min(max([len(r["trace"]) for r in rows] + [5]), 40) + 1
-    head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>15}{'K N/m':>15}{'eta':>8}{'win':>5}"
+    last = "n_windows" if "n_windows" in rows[0] else "gof" if "gof" in rows[0] else None
+    head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>15}{'K N/m':>15}{'eta':>8}"
+    head += {"n_windows": f"{'win':>5}", "gof": f"{'gof':>6}", None: ""}[last]
     if has_cl:
         head += f"{'| classical U0':>15}{'K':>8}"
     if truth:
@@ -153,7 +156,11 @@ def format_rows(rows: Sequence[dict[str, Any]], truth: dict[str, dict] | None = 
     for r in rows:
         s = (f"{r['trace'][: w - 1]:<{w}}{r['F_mean_nN']:>9.3f}"
              f"{r['U0_eV']:>8.3f}+-{r['U0_eV_std']:<5.2f}{r['K_N_m']:>8.2f}+-{r['K_N_m_std']:<5.2f}"
-             f"{r['eta']:>8.2f}{r['n_windows']:>5d}")  # fmt: skip
+             f"{r['eta']:>8.2f}")  # fmt: skip
+        if last == "n_windows":
+            s += f"{r['n_windows']:>5d}"
+        elif last == "gof":
+            s += f"{r['gof']:>5.1f}{'!' if r.get('ppc_flag') else ' '}"
         if has_cl:
             cu, ck = r.get("classical_U0_eV", np.nan), r.get("classical_K_N_m", np.nan)
             s += f"{cu:>15.3f}{ck:>8.2f}"

@@ -12,7 +12,7 @@ import numpy as np
 
 from stickslip.data.dataset import Dataset
 from stickslip.evaluation.report import Evaluation, evaluate_model
-from stickslip.learning.modelfile import TrainedModel, load_model, save_model
+from stickslip.learning.modelfile import TrainedModel, save_model
 from stickslip.learning.results import format_rows, run_inference, write_panels, write_results
 
 Echo = Callable[[str], None]
@@ -46,21 +46,33 @@ def infer_job(
     note: Echo = print,
     traces: list[Any] | None = None,
     truth: dict[str, dict] | None = None,
+    check: bool = False,
 ) -> int:
     """Read traces, estimate, write the table (and panels); returns the failure count.
 
-    Every unreadable or too-short trace is reported through ``warn`` (one line each) and
-    the others are processed. No processable trace at all counts as a failure.
+    ``model`` is a window model or a line model (:func:`load_any_model`); ``check`` runs
+    the posterior predictive check (line models). Every unreadable or too-short trace is
+    reported through ``warn`` (one line each) and the others are processed. No
+    processable trace at all counts as a failure.
     """
     from stickslip.data.trace import collect_traces
+    from stickslip.learning.line import LineEnsemble
 
     errors: list[Any] = []
     if traces is None:
         traces, errors = collect_traces(list(paths), **(reader_options or {}))
     for e in errors:
         warn(str(e))
-    res = run_inference(model, traces, lattice_nm, velocity_nm_per_s, temperature_K,
-                        classical=classical, keep_windows=plots is not None)  # fmt: skip
+    if isinstance(model, LineEnsemble):
+        from stickslip.learning.line_results import run_line_inference, write_line_panels
+
+        res = run_line_inference(model, traces, lattice_nm, velocity_nm_per_s, temperature_K,
+                                 classical=classical, check=check)  # fmt: skip
+        panels = write_line_panels
+    else:
+        res = run_inference(model, traces, lattice_nm, velocity_nm_per_s, temperature_K,
+                            classical=classical, keep_windows=plots is not None)  # fmt: skip
+        panels = write_panels
     for name, reason in res.failures:
         warn(f"{name}: {reason}")
     for n in res.notes:
@@ -70,7 +82,7 @@ def infer_job(
         echo(format_rows(res.rows, truth))
         note(f"wrote {out} ({len(res.rows)} traces)")
         if plots is not None:
-            write_panels(res, traces, plots)
+            panels(res, traces, plots)
             note(f"wrote {len(res.rows)} panels in {plots}")
         return len(errors) + len(res.failures)
     warn("no trace could be processed; nothing written")
@@ -106,13 +118,18 @@ def load_examples() -> tuple[list[Any], dict[str, dict]]:
 def demo_job(out: str | os.PathLike, echo: Echo = print, warn: Echo = print,
              note: Echo = print) -> int:  # fmt: skip
     """The main job on the embedded defaults: bundled model, bundled example traces."""
-    model = load_model(None)
+    from stickslip.learning.line_model import load_any_model
+
+    model = load_any_model(None)
     traces, truth = load_examples()
     out = Path(out)
-    note(f"bundled model: {model.features.recipe} recipe, window {model.features.window} px; "
-         f"{len(traces)} example traces (true values in the last columns)")  # fmt: skip
+    kind = (f"{model.features.recipe} recipe, window {model.features.window} px"
+            if isinstance(model, TrainedModel)
+            else f"whole-line CNN ensemble of {len(model.members)} with 68/95 % intervals")
+    note(f"bundled model: {kind}; {len(traces)} example traces (true values in the last "
+         "columns)")  # fmt: skip
     return infer_job(model, [], out / "results.csv", out / "plots", traces=traces, truth=truth,
-                     echo=echo, warn=warn, note=note)  # fmt: skip
+                     echo=echo, warn=warn, note=note, check=True)  # fmt: skip
 
 
 def sweep_if_missing(

@@ -77,7 +77,8 @@ def _group_traces(path: Path, group: Any, file_meta: dict[str, Any]) -> list[Tra
     for i in np.flatnonzero(done).tolist():
         xi, fi = np.array(xs[i], dtype=float), np.array(force[i], dtype=float)
         validate_trace(xi, fi, str(path))
-        meta = dict(meta0, index=i, **{k: v[i].item() for k, v in extra.items()})
+        # the row index, unless the file's own per-trace table states one
+        meta = {**meta0, "index": i, **{k: v[i].item() for k, v in extra.items()}}
         out.append(Trace(x_nm=xi, force_nN=fi, name=names[i], source=str(path), meta=meta))
     return out
 

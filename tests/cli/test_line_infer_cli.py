@@ -1,0 +1,63 @@
+"""`stickslip infer` with a whole-line model: intervals, check, panels, bad input."""
+
+import csv
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from stickslip.cli.main import app
+from stickslip.data import write_trace_csv
+from stickslip.learning.line import LineCNN, LineEnsemble, LineSpec
+from stickslip.learning.line_model import save_line_model
+from stickslip.simulation import simulate
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def line_model(tmp_path_factory):
+    torch.manual_seed(0)
+    ens = LineEnsemble(members=[LineCNN(), LineCNN()], spec=LineSpec(),
+                       y_mean=np.array([0.0, 0.5, 2.0, 1.5]),
+                       y_std=np.array([0.05, 0.8, 0.9, 0.9]))  # fmt: skip
+    return save_line_model(ens, tmp_path_factory.mktemp("m") / "line.pt", (16, 32, 48, 64),
+                           {}, {}, {})  # fmt: skip
+
+
+def test_infer_line_model_rows_intervals_check_and_bad_files(tmp_path, line_model):
+    r = simulate([1.0, 3.0], [10.0, 25.0], seed=2)
+    for i in range(2):
+        write_trace_csv(tmp_path / f"ok{i}.csv", r.x_nm, r.force_nN[i])
+    (tmp_path / "broken.csv").write_text("x_nm,force_nN\n0,1\n1,nan\n")
+    out = tmp_path / "res.csv"
+    res = runner.invoke(app, ["infer", str(tmp_path / "ok0.csv"), str(tmp_path / "ok1.csv"),
+                              str(tmp_path / "broken.csv"), "--model", str(line_model),
+                              "--check", "--plots", str(tmp_path / "plots"),
+                              "--out", str(out)])  # fmt: skip
+    assert res.exit_code == 1, res.output
+    err = [ln for ln in res.stderr.splitlines() if "error" in ln]
+    assert len(err) == 1 and "broken.csv" in err[0]
+    assert "Traceback" not in res.output
+    rows = list(csv.DictReader(out.open()))
+    assert [row["trace"] for row in rows] == ["ok0", "ok1"]
+    for row in rows:
+        for k in ("U0_eV", "K_N_m", "eta", "F_mean_nN"):
+            lo95, lo68 = float(row[f"{k}_lo95"]), float(row[f"{k}_lo68"])
+            hi68, hi95 = float(row[f"{k}_hi68"]), float(row[f"{k}_hi95"])
+            assert lo95 < lo68 < float(row[k]) < hi68 < hi95
+        assert float(row["gof"]) >= 0 and row["ppc_flag"] in ("0", "1")
+        assert row["classical_U0_eV"] != ""
+    assert len(list((tmp_path / "plots").glob("*.png"))) == 2
+
+
+def test_damaged_model_file_is_one_line(tmp_path, line_model):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(line_model.read_bytes()[:300])
+    r = simulate([1.0], [10.0], seed=2)
+    write_trace_csv(tmp_path / "t.csv", r.x_nm, r.force_nN[0])
+    res = runner.invoke(app, ["infer", str(tmp_path / "t.csv"), "--model", str(bad),
+                              "--out", str(tmp_path / "o.csv")])  # fmt: skip
+    assert res.exit_code == 2
+    assert len(res.stderr.strip().splitlines()) == 1 and "bad.pt" in res.stderr
