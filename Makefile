@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test lint bench model clean
+.PHONY: install demo test test-slow bench bench-learn model line-model clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -23,11 +23,25 @@ test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks scripts
 	$(BIN)/python -m pytest -q -m "not slow"
 
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q -m slow
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/simulate.py
+	$(BIN)/python benchmarks/classical.py
+
+bench-learn: $(STAMP)
+	$(BIN)/python benchmarks/paper_table.py
+	$(BIN)/python benchmarks/lattice_mapping.py
+	$(BIN)/python benchmarks/noise_robustness.py
+	$(BIN)/python benchmarks/inference_speed.py --threads 1
+	$(BIN)/python benchmarks/lab_bench.py
 
 model: $(STAMP)
 	$(BIN)/python scripts/train_default_model.py
 
+line-model: $(STAMP)
+	$(BIN)/python scripts/train_line_model.py
+
 clean:
-	rm -rf $(VENV) stickslip-demo
+	rm -rf $(VENV) stickslip-demo build

@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=4000)
     ap.add_argument("--seed", type=int, default=101)
     ap.add_argument("--members", type=int, default=3)
-    ap.add_argument("--epochs", type=int, default=20)
+    ap.add_argument("--epochs", type=int, default=30)
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")

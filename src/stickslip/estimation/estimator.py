@@ -52,13 +52,13 @@ QUALITY = {
 REGIMES = ("smooth", "single slip", "multiple slip")
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _spread(v: np.ndarray) -> float:
     vals = v[~np.isnan(v)]
     return sl._mad_sigma(vals) if vals.size > 1 else np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
                   mass_kg: float, gamma: float, out: np.ndarray) -> None:  # fmt: skip
     out[:] = np.nan
@@ -136,7 +136,7 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     out[STATUS] = 0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def _estimate_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, a: np.ndarray,
                     T: np.ndarray, v: np.ndarray, mass_kg: float,
                     gamma: float) -> np.ndarray:  # fmt: skip

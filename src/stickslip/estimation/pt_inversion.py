@@ -46,7 +46,7 @@ N_GRID = 160  # branch points of the thermal model
 MAX_ITER = 12
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def k_from_segment(k_seg: float, F_lo: float, F_hi: float, Fmax: float, a: float) -> float:
     """Contact stiffness K (N/m) from a segment's secant slope (NaN if inconsistent)."""
     if not (k_seg > 0) or not (Fmax > 0):
@@ -56,13 +56,13 @@ def k_from_segment(k_seg: float, F_lo: float, F_hi: float, Fmax: float, a: float
     if r_hi - r_lo > 1e-6:
         g = (np.arcsin(r_hi) - np.arcsin(r_lo)) / (r_hi - r_lo)
     else:  # derivative of asin at the midpoint
-        rm = min(0.5 * (r_lo + r_hi), 0.999999)
+        rm = min(max(0.5 * (r_lo + r_hi), -0.999999), 0.999999)
         g = 1.0 / np.sqrt(1.0 - rm * rm)
     inv = 1.0 / k_seg - a / (2.0 * np.pi * Fmax) * g
     return 1.0 / inv if inv > 0 else np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _saddle(th: float, eta: float, th_c: float, guess: float) -> float:
     """Saddle phase ahead of the minimum at ``th`` (NaN if there is none).
 
@@ -91,7 +91,7 @@ def _saddle(th: float, eta: float, th_c: float, guess: float) -> float:
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v: float,
                   mass_kg: float, gamma: float) -> float:  # fmt: skip
     """Mean peak force (nN) of a stick phase at temperature T (see module docstring).
@@ -152,7 +152,7 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
     return total + S_prev * Fmax
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float,
               a: float, out: np.ndarray) -> float:  # fmt: skip
     for i in range(k_seg.size):
@@ -161,7 +161,7 @@ def _median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float
     return np.median(vals) if vals.size > 0 else np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def invert(F_peak: float, F_after: float, k_seg: np.ndarray, F_lo: np.ndarray,
            F_hi: np.ndarray, a: float, T: float, v: float, mass_kg: float, gamma: float,
            K_out: np.ndarray) -> tuple[float, float]:  # fmt: skip

@@ -41,7 +41,7 @@ SLIP_X, SLIP_F, SLIP_F_AFTER, SLIP_PEAK, SLIP_CENTRE = 0, 1, 2, 3, 4
 N_SLIP_COLS = 5
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mad_sigma(v: np.ndarray) -> float:
     if v.size == 0:
         return 0.0
@@ -52,7 +52,7 @@ def _mad_sigma(v: np.ndarray) -> float:
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def noise_sigma(F: np.ndarray) -> float:
     """White-noise standard deviation per sample from second differences (robust)."""
     if F.size < 3:
@@ -61,7 +61,7 @@ def noise_sigma(F: np.ndarray) -> float:
     return _mad_sigma(d2) / np.sqrt(6.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _despike(F: np.ndarray) -> np.ndarray:
     # 3-point median: removes single-sample spikes, whose return looks like a slip
     G = F.copy()
@@ -71,7 +71,7 @@ def _despike(F: np.ndarray) -> np.ndarray:
     return G
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _window_diff(G: np.ndarray, w: int) -> np.ndarray:
     """``D[i] = mean(G[i+1..i+w]) - mean(G[i-w+1..i])``; NaN where undefined."""
     n = G.size
@@ -84,7 +84,7 @@ def _window_diff(G: np.ndarray, w: int) -> np.ndarray:
     return D
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _events(D: np.ndarray, thr: float, out: np.ndarray) -> int:
     """Runs of ``D < -thr/2`` reaching ``-thr``; rows (first, last, argmin, depth)."""
     n = D.size
@@ -110,7 +110,7 @@ def _events(D: np.ndarray, thr: float, out: np.ndarray) -> int:
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _force_range(x: np.ndarray, F: np.ndarray) -> float:
     # 5-95 % range of the linearly detrended force: the size of a typical drop
     n = F.size
@@ -122,7 +122,7 @@ def _force_range(x: np.ndarray, F: np.ndarray) -> float:
     return np.percentile(r, 95.0) - np.percentile(r, 5.0) if n > 1 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, float]:
     """Find slip events.
 
@@ -158,7 +158,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     return np.empty((0, 4)), 1, sigma, span
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _polyfit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg: int,
              mask: np.ndarray) -> tuple[float, float, float]:  # fmt: skip
     """Least-squares polynomial (degree 1 or 2) on samples lo..hi (inclusive) with mask."""
@@ -189,7 +189,7 @@ def _polyfit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg: i
     return c0 / det, c1 / det, c2 / det
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _robust_fit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg: int,
                 sigma: float, mask: np.ndarray) -> tuple[float, float, float]:  # fmt: skip
     c0, c1, c2 = _polyfit(x, F, lo, hi, xref, deg, mask)
@@ -212,7 +212,7 @@ def _robust_fit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg
     return _polyfit(x, F, lo, hi, xref, deg, mask2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
                  row: np.ndarray) -> None:  # fmt: skip
     """Fill one row of the segment table (NaN slope if too short)."""
@@ -241,13 +241,13 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
     row[SEG_F_HI] = b0 + b1 * (x[hi_r] - xref)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _poly_at(row: np.ndarray, X: float) -> float:
     u = X - row[SEG_XREF]
     return row[SEG_C0] + row[SEG_C1] * u + row[SEG_C2] * u * u
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _poly_int(row: np.ndarray, A: float, B: float) -> float:
     ua = A - row[SEG_XREF]
     ub = B - row[SEG_XREF]
@@ -255,7 +255,7 @@ def _poly_int(row: np.ndarray, A: float, B: float) -> float:
             + row[SEG_C2] * (ub**3 - ua**3) / 3.0)  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray,
                  sigma: float, out: np.ndarray) -> None:  # fmt: skip
     """Sub-pixel slip position by matching the force integral between two segments."""
@@ -304,7 +304,7 @@ def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray
     out[SLIP_PEAK] = peak
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Detect slips and fit the stick segments between them.
 

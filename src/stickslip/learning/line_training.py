@@ -55,6 +55,8 @@ class LineTrainConfig:
     weight_decay: float = 1e-4
     beta: float = 0.5
     mse_epochs: int = 2
+    clean_fraction: float = 0.2  # traces left without detector effects, so the model
+    # also learns how sure it can be on a clean line
     val_fraction: float = 0.1
     seed: int = 0
     channels: tuple[int, ...] = (16, 32, 48, 64)
@@ -74,13 +76,15 @@ def line_targets(U0_eV, K_N_m, F_mean_nN, lattice_nm, spec: LineSpec) -> np.ndar
 
 
 def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, rng,
-                  crop: int | None):  # fmt: skip
-    """Corrupt, map and stack a batch.
+                  crop: int | None, clean_fraction: float = 0.0):  # fmt: skip
+    """Corrupt, map and stack a batch (a ``clean_fraction`` of traces left clean).
 
     Returns the input and conditioning tensors and the mean of each corrupted trace
     (the friction target is the clean mean minus it: see :data:`TARGETS`).
     """
     F, _ = apply_instrument(force_nN, effects, rng)
+    clean = rng.random(F.shape[0]) < clean_fraction
+    F[clean] = force_nN[clean]
     lines = [map_line(x_nm, f, a, spec) for f, a in zip(F, lattice_nm, strict=True)]
     X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
     return X, conditioning(lattice_nm, velocity_nm_per_s, spec), F.mean(axis=1)
@@ -146,7 +150,8 @@ def train_line_ensemble(
             for b in range(steps_per_epoch):
                 idx = order[b * config.batch_size : (b + 1) * config.batch_size]
                 X, C, obs = prepare_batch(force_nN[idx], a[idx], v[idx], x_nm, spec,
-                                          config.effects, rng, crop=spec.crop)  # fmt: skip
+                                          config.effects, rng, crop=spec.crop,
+                                          clean_fraction=config.clean_fraction)  # fmt: skip
                 mean, log_var = net(X, C)
                 y = _standardise_friction(Y[idx], obs, y_mean, y_std)
                 if epoch < config.mse_epochs:
