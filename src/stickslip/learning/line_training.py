@@ -126,8 +126,10 @@ def train_line_ensemble(
     a, v = params["lattice_nm"], params["velocity_nm_per_s"]
     Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"], a, spec)
     val_rng = np.random.default_rng([config.seed, 999])
+    # validation traces are corrupted like training ones (same clean fraction), once
     Xv, Cv, mean_v = prepare_batch(force_nN[val], a[val], v[val], x_nm, spec, config.effects,
-                                   val_rng, crop=None)  # fmt: skip
+                                   val_rng, crop=None,
+                                   clean_fraction=config.clean_fraction)  # fmt: skip
     # friction: the network predicts the correction to the observed mean (~ the offset)
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
