@@ -97,16 +97,10 @@ def load_line_model(path: str | os.PathLike | None = None) -> LineEnsemble:
     ModelFileError
         One line: missing, corrupt, not a line model, or from an incompatible version.
     """
+    from stickslip.learning.modelfile import load_bundled, read_payload
+
     if path is None:
-        from importlib.resources import as_file, files
-
-        ref = files("stickslip").joinpath("resources", BUNDLED)
-        if not ref.is_file():
-            raise ModelFileError("the bundled line model is missing from this installation")
-        with as_file(ref) as p:
-            return load_line_model(p)
-    from stickslip.learning.modelfile import read_payload
-
+        return load_bundled(BUNDLED, load_line_model)
     p = Path(path)
     return line_from_payload(read_payload(p), str(p))
 

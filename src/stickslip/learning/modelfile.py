@@ -141,15 +141,20 @@ def load_model(path: str | os.PathLike | None = None) -> TrainedModel:
         One line: missing, corrupt, not a model file, or from an incompatible version.
     """
     if path is None:
-        from importlib.resources import as_file, files
-
-        ref = files("stickslip").joinpath("resources", DEFAULT_MODEL_NAME)
-        if not ref.is_file():
-            raise ModelFileError("the bundled default model is missing from this installation")
-        with as_file(ref) as p:
-            return load_model(p)
+        return load_bundled(DEFAULT_MODEL_NAME, load_model)
     p = Path(path)
     return from_payload(read_payload(p), str(p))
+
+
+def load_bundled(name: str, loader: Any) -> Any:
+    """``loader(path)`` on the model file ``name`` shipped in ``stickslip/resources``."""
+    from importlib.resources import as_file, files
+
+    ref = files("stickslip").joinpath("resources", name)
+    if not ref.is_file():
+        raise ModelFileError(f"the bundled model {name} is missing from this installation")
+    with as_file(ref) as p:
+        return loader(p)
 
 
 def read_payload(path: str | os.PathLike) -> dict[str, Any]:
