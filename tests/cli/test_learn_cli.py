@@ -63,14 +63,22 @@ def test_infer_bad_model_files_give_one_line(traces, tmp_path):
     assert not (tmp_path / "r.csv").exists()
 
 
-def test_infer_on_another_lattice(tmp_path):
+@pytest.mark.parametrize("kind", ["window", "line"])
+def test_infer_on_another_lattice(tmp_path, kind):
+    from importlib.resources import files
+
     ph = PRESETS["mos2"]
     res = simulate([2.0], [15.0], ph, seed=3)
     write_trace_csv(tmp_path / "mos2.csv", res.x_nm, res.force_nN[0])
+    # the window model is given explicitly; the default is the bundled line model
+    model = ["--model", files("stickslip") / "resources" / "default_model.pt"]
     r = _run(["infer", tmp_path / "mos2.csv", "--lattice", 0.316, "--velocity", 30,
-              "--out", tmp_path / "r.csv", "--no-classical"])  # fmt: skip
+              "--out", tmp_path / "r.csv", "--no-classical",
+              *(model if kind == "window" else [])])  # fmt: skip
     assert r.exit_code == 0, r.output
-    assert "thermal activation is not mapped" in r.stderr
+    # the window model maps the lattice but not thermal activation, and says so; the
+    # line model is conditioned on lattice and velocity
+    assert ("thermal activation is not mapped" in r.stderr) == (kind == "window")
     row = next(csv.DictReader((tmp_path / "r.csv").open()))
     assert abs(float(row["U0_eV"]) - 2.0) < 0.4 and abs(float(row["K_N_m"]) - 15.0) < 3
 
