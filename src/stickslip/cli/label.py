@@ -22,6 +22,15 @@ def label(
     plots: Path | None = typer.Option(
         None, "--plots", help="Folder for one diagnostic plot per trace (PNG)."
     ),
+    calibration: float | None = typer.Option(
+        None, "--calibration", help="Lateral calibration in nN/V for force channels in volts."
+    ),
+    lines_per_load: int | None = typer.Option(
+        None, "--lines-per-load", help="Consecutive scan lines recorded at one load."
+    ),
+    loads: str | None = typer.Option(
+        None, "--loads", help="Comma-separated loads of the line groups (with --lines-per-load)."
+    ),
 ) -> None:
     """Label traces with the classical stick-slip estimator.
 
@@ -29,8 +38,10 @@ def label(
     Prandtl-Tomlinson relations (F_max = pi U0/a, stick slope K eta c/(1 + eta c)),
     correcting the peak for thermal activation at the given temperature, velocity and
     lattice. Columns: trace, F_mean_nN, U0_eV, K_N_m, eta, k_exp_N_m, F_peak_nN,
-    n_slips, regime, quality, then *_std (spread over slips). Exit code 1 if any
-    input could not be read (its row says why), 2 for a usage error.
+    n_slips, regime, quality, then *_std (spread over slips) and the trace's provenance.
+    Traces from maps with a load schedule (--lines-per-load, --loads, or loads stored in
+    the file) are also summarised per load (<out>.by_load.csv and .png). Exit code 1 if
+    any input could not be read (its row says why), 2 for a usage error.
     """
     if not lattice > 0:
         usage_error(f"--lattice must be > 0 nm (got {lattice:g})")
@@ -41,11 +52,17 @@ def label(
     if out.is_dir():
         usage_error(f"--out {out} is a directory")
 
+    from stickslip.data.formats.maps import parse_loads, reader_options
     from stickslip.data.trace import collect_traces
     from stickslip.estimation import analyse_trace, estimate_traces
     from stickslip.evaluation.labels_report import write_labels_csv
+    from stickslip.evaluation.loads import write_load_report
 
-    found, errors = collect_traces(traces)
+    try:
+        opts = reader_options(calibration, lines_per_load, parse_loads(loads))
+    except ValueError as e:
+        usage_error(str(e))
+    found, errors = collect_traces(traces, **opts)
     for e in errors:
         error(str(e))
     estimates = estimate_traces(
@@ -55,6 +72,10 @@ def label(
         write_labels_csv(out, estimates, errors)
     except OSError as e:
         usage_error(f"cannot write {out} ({e.strerror})")
+    by_load = write_load_report([{**e.meta, **e.as_dict()} for e in estimates], out,
+                                "classical estimates versus load")  # fmt: skip
+    if by_load:
+        info(f"wrote {by_load[0]} and {by_load[1]} (per load group)")
     if plots is not None:
         from stickslip.evaluation.plots_classical import plot_trace_diagnostics
 

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from stickslip.learning.inference import MAX_PIXEL_RATIO
 from stickslip.learning.line import LineEnsemble, predict_raw_lines
 from stickslip.learning.results import META_COLUMNS, _classical, safe_name
 
@@ -61,8 +62,14 @@ def run_line_inference(
                      "estimates are extrapolated")  # fmt: skip
     failures, ok = [], []
     for i, t in enumerate(traces):
-        mapped_pixels = (t.x_nm[-1] - t.x_nm[0]) * spec.lattice_nm / a[i] / spec.pixel_nm
-        if mapped_pixels < spec.min_pixels:
+        s = a[i] / spec.lattice_nm
+        pixel = (t.x_nm[-1] - t.x_nm[0]) / max(t.x_nm.size - 1, 1)
+        mapped_pixels = (t.x_nm[-1] - t.x_nm[0]) / s / spec.pixel_nm
+        if pixel > MAX_PIXEL_RATIO * spec.pixel_nm * s:
+            failures.append((t.name, f"pixel {pixel:.3g} nm does not resolve the {a[i]:.3g} nm "
+                                     f"lattice (the model needs pixels <= "
+                                     f"{MAX_PIXEL_RATIO * spec.pixel_nm * s:.3g} nm)"))  # fmt: skip
+        elif mapped_pixels < spec.min_pixels:
             failures.append((t.name, f"too short: {mapped_pixels:.0f} mapped pixels, at least "
                                      f"{spec.min_pixels} needed"))  # fmt: skip
         else:

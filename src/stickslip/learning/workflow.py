@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from stickslip.data.dataset import Dataset
+from stickslip.evaluation.loads import write_load_report
 from stickslip.evaluation.report import Evaluation, evaluate_model
 from stickslip.learning.modelfile import TrainedModel, save_model
 from stickslip.learning.results import format_rows, run_inference, write_panels, write_results
@@ -81,6 +82,9 @@ def infer_job(
         write_results(res.rows, out)
         echo(format_rows(res.rows, truth))
         note(f"wrote {out} ({len(res.rows)} traces)")
+        by_load = write_load_report(res.rows, out, "network estimates versus load")
+        if by_load:
+            note(f"wrote {by_load[0]} and {by_load[1]} (per load group)")
         if plots is not None:
             panels(res, traces, plots)
             note(f"wrote {len(res.rows)} panels in {plots}")
