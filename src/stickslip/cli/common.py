@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 
@@ -30,3 +30,37 @@ def info(message: str) -> None:
 
 def is_interactive() -> bool:
     return sys.stderr.isatty()
+
+
+# Reading options shared by every command that reads vendor maps.
+CALIBRATION_HELP = "Lateral calibration in nN/V, for force channels in volts (file value wins)."
+LPL_HELP = "Consecutive scan lines recorded at one load (groups lines by load)."
+LOADS_HELP = "Comma-separated loads/setpoints of the line groups (with --lines-per-load)."
+
+
+def parse_loads_arg(text: str | None) -> list[float] | None:
+    """``--loads`` as a list of floats, or a usage error."""
+    from stickslip.data.formats.maps import parse_loads
+
+    try:
+        return parse_loads(text)
+    except ValueError as e:
+        usage_error(str(e))
+
+
+def reading_options(
+    calibration: float | None,
+    lines_per_load: int | None,
+    loads: list[float] | None,
+    scan_size_nm: float | None = None,
+    load_unit: str = "nN",
+) -> dict[str, Any]:
+    """Reader ``**options`` for :func:`stickslip.data.collect_traces`, or a usage error."""
+    from stickslip.data.formats.maps import reader_options
+
+    try:
+        return reader_options(
+            calibration, lines_per_load, loads, load_unit=load_unit, scan_size_nm=scan_size_nm
+        )
+    except ValueError as e:
+        usage_error(str(e))

@@ -9,45 +9,24 @@ from typing import Any
 
 import typer
 
-from stickslip.cli.common import EXIT_FAILED_INPUT, EXIT_OK, error, usage_error
+from stickslip.cli.common import (
+    CALIBRATION_HELP,
+    EXIT_FAILED_INPUT,
+    EXIT_OK,
+    LOADS_HELP,
+    LPL_HELP,
+    error,
+    parse_loads_arg,
+    reading_options,
+    usage_error,
+)
 from stickslip.cli.main import app
 from stickslip.data.atomic import write_text_atomic
 from stickslip.data.formats.common import ScanFile
 from stickslip.data.formats.loadplot import plot_versus_load
-from stickslip.data.formats.maps import (
-    TRACE,
-    parse_loads,
-    reader_options,
-    summarise_by_load,
-)
+from stickslip.data.formats.maps import TRACE, summarise_by_load
 from stickslip.data.readers import is_scan_file, read_file, read_scan
 from stickslip.data.trace import Trace, TraceReadError, expand_paths
-
-CALIBRATION_HELP = "Lateral calibration in nN/V, for force channels in volts (file value wins)."
-LPL_HELP = "Consecutive scan lines recorded at one load (groups lines by load)."
-LOADS_HELP = "Comma-separated loads/setpoints of the line groups (with --lines-per-load)."
-
-
-def _options(
-    calibration: float | None,
-    lines_per_load: int | None,
-    loads: list[float] | None,
-    scan_size_nm: float | None,
-    load_unit: str = "nN",
-) -> dict[str, Any]:
-    try:
-        return reader_options(
-            calibration, lines_per_load, loads, load_unit=load_unit, scan_size_nm=scan_size_nm
-        )
-    except ValueError as e:
-        usage_error(str(e))
-
-
-def _loads(text: str | None) -> list[float] | None:
-    try:
-        return parse_loads(text)
-    except ValueError as e:
-        usage_error(str(e))
 
 
 def _fmt(v: Any, unit: str = "") -> str:
@@ -115,7 +94,7 @@ def inspect_cmd(
     ),
 ) -> None:
     """Show channels, scan size, rate, setpoint and the traces a file would give."""
-    opts = _options(calibration, lines_per_load, _loads(loads), scan_size_nm)
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads), scan_size_nm)
     failed = 0
     for p in expand_paths(files):
         try:
@@ -176,9 +155,9 @@ def friction_load_cmd(
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
 ) -> None:
     """Mean friction, half (trace - retrace), versus setpoint/load for a load ramp."""
-    load_list = _loads(loads)
-    opts = _options(calibration, lines_per_load, load_list if lines_per_load else None, None,
-                    load_unit)
+    load_list = parse_loads_arg(loads)
+    opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
+                           None, load_unit)
     paths = expand_paths(files)
     if load_list and not lines_per_load and len(load_list) != len(paths):
         usage_error(f"--loads gives {len(load_list)} values for {len(paths)} files")

@@ -6,7 +6,17 @@ from pathlib import Path
 
 import typer
 
-from stickslip.cli.common import EXIT_FAILED_INPUT, error, info, usage_error
+from stickslip.cli.common import (
+    CALIBRATION_HELP,
+    EXIT_FAILED_INPUT,
+    LOADS_HELP,
+    LPL_HELP,
+    error,
+    info,
+    parse_loads_arg,
+    reading_options,
+    usage_error,
+)
 from stickslip.cli.main import app
 
 
@@ -22,15 +32,9 @@ def label(
     plots: Path | None = typer.Option(
         None, "--plots", help="Folder for one diagnostic plot per trace (PNG)."
     ),
-    calibration: float | None = typer.Option(
-        None, "--calibration", help="Lateral calibration in nN/V for force channels in volts."
-    ),
-    lines_per_load: int | None = typer.Option(
-        None, "--lines-per-load", help="Consecutive scan lines recorded at one load."
-    ),
-    loads: str | None = typer.Option(
-        None, "--loads", help="Comma-separated loads of the line groups (with --lines-per-load)."
-    ),
+    calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
+    lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
+    loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
 ) -> None:
     """Label traces with the classical stick-slip estimator.
 
@@ -52,16 +56,12 @@ def label(
     if out.is_dir():
         usage_error(f"--out {out} is a directory")
 
-    from stickslip.data.formats.maps import parse_loads, reader_options
     from stickslip.data.trace import collect_traces
     from stickslip.estimation import analyse_trace, estimate_traces
     from stickslip.evaluation.labels_report import write_labels_csv
     from stickslip.evaluation.loads import write_load_report
 
-    try:
-        opts = reader_options(calibration, lines_per_load, parse_loads(loads))
-    except ValueError as e:
-        usage_error(str(e))
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
     found, errors = collect_traces(traces, **opts)
     for e in errors:
         error(str(e))

@@ -6,7 +6,18 @@ from pathlib import Path
 
 import typer
 
-from stickslip.cli.common import EXIT_FAILED_INPUT, EXIT_OK, error, info, usage_error
+from stickslip.cli.common import (
+    CALIBRATION_HELP,
+    EXIT_FAILED_INPUT,
+    EXIT_OK,
+    LOADS_HELP,
+    LPL_HELP,
+    error,
+    info,
+    parse_loads_arg,
+    reading_options,
+    usage_error,
+)
 from stickslip.cli.main import app
 
 MODEL_HELP = "Model file from 'stickslip train' (default: the bundled model)."
@@ -91,15 +102,9 @@ def infer_cmd(
     ),
     velocity: float | None = typer.Option(None, "--velocity", help="Scan velocity, nm/s."),
     temperature: float | None = typer.Option(None, "--temperature", help="Temperature, K."),
-    calibration: float | None = typer.Option(
-        None, "--calibration", help="Lateral calibration in nN/V for force channels in volts."
-    ),
-    lines_per_load: int | None = typer.Option(
-        None, "--lines-per-load", help="Consecutive scan lines recorded at one load."
-    ),
-    loads: str | None = typer.Option(
-        None, "--loads", help="Comma-separated loads of the line groups (with --lines-per-load)."
-    ),
+    calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
+    lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
+    loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for per-trace panels."),
     classical: bool = typer.Option(
         True, "--classical/--no-classical", help="Add the classical estimator's columns."
@@ -125,12 +130,7 @@ def infer_cmd(
             usage_error(f"{name} must be > 0")
     if temperature is not None and temperature < 0:
         usage_error("--temperature must be >= 0 K")
-    from stickslip.data.formats.maps import parse_loads, reader_options
-
-    try:
-        opts = reader_options(calibration, lines_per_load, parse_loads(loads))
-    except ValueError as e:
-        usage_error(str(e))
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
     m = _load_model(model, any_kind=True)
     failed = infer_job(
         m, traces, out, plots, lattice_nm=lattice, velocity_nm_per_s=velocity,
