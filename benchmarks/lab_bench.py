@@ -89,6 +89,15 @@ def score(truth, pred, mask) -> dict[str, float]:
     return r
 
 
+def groups(set_name: str, ds, ok: np.ndarray) -> dict[str, np.ndarray]:
+    """Masks scored for a data set: the whole set, and each material on the bench."""
+    out = {set_name: ok}
+    if set_name == "bench":
+        for m, mat in enumerate(MATERIALS):
+            out[f"bench {mat}"] = ok & (ds.params["material"] == m)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "lab-bench")
@@ -115,11 +124,7 @@ def main() -> None:
         truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
         ok = (truth["eta"] >= 1.5) & (truth["eta"] <= 40)
         preds = predictions(ds, line_model, mlps)
-        groups = {set_name: ok}
-        if set_name == "bench":
-            for m, mat in enumerate(MATERIALS):
-                groups[f"bench {mat}"] = ok & (ds.params["material"] == m)
-        for g, mask in groups.items():
+        for g, mask in groups(set_name, ds, ok).items():
             print(f"\n{g}: {int(mask.sum())} traces with 1.5 <= eta <= 40")
             print(f"{'estimator':<12}{'<F> RMSE nN':>13}{'U0 rel RMSE':>13}{'K rel RMSE':>12}"
                   f"{'U0 RMSE eV':>12}{'K RMSE N/m':>12}{'cov68 U0/K':>13}{'cov95 U0/K':>13}")

@@ -1,0 +1,158 @@
+"""The whole-line CNN against the paper's window MLPs trained on the same randomised data.
+
+The lab bench (benchmarks/lab_bench.py) compares the line CNN, trained with domain
+randomisation, with the paper's MLPs trained on clean paper-preset traces. This
+benchmark trains the MLPs (raw and pi recipes, the paper's network and optimiser, p =
+64, stride 64, train stride 16, as lab_bench.py) on the line model's own training set
+instead: the domain-randomised set mapped onto the reference lattice, labels in the
+reference frame, corrupted with the line model's detector effects (20 % left clean),
+several independent corruption replicas per trajectory
+(stickslip.learning.randomised_windows). Replicas of a trajectory stay on one side of
+the train/validation split.
+
+All estimators are scored as in lab_bench.py on its clean held-out set (300 paper-preset
+traces, seed 4242) and on the bench (600 traces, three materials), for traces with
+1.5 <= eta <= 40. The clean-trained MLPs are included when build/lab-bench/mlp_*.pt
+exist. "<F> net" is the MLPs' own window estimate of <F> (their "<F>" column is the
+trace's mean, as in lab_bench.py). Writes summary.json into --work.
+
+Usage: python benchmarks/encoder_vs_mlp.py [--work build/encoder-vs-mlp] [--replicas 3]
+       [--epochs 50] [--data build/line-train/randomised_4000_101.h5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from stickslip.data.dataset import load_dataset
+from stickslip.data.trace import Trace
+from stickslip.evaluation.bench import BenchConfig, make_bench
+from stickslip.learning.inference import predict_traces
+from stickslip.learning.modelfile import load_model, save_model
+from stickslip.learning.randomised_windows import (
+    randomised_window_set,
+    split_by_group,
+)
+from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.learning.workflow import sweep_if_missing
+from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
+from lab_bench import groups, predictions, score  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+LAB = ROOT / "build" / "lab-bench"
+
+
+def dr_window_model(train, work: Path, recipe: str, epochs: int, replicas: int):
+    """The paper's MLP for a recipe trained on the randomised window set (cached)."""
+    path = work / f"mlp_{recipe}_dr_r{replicas}_e{epochs}.pt"
+    if path.exists():
+        model = load_model(path)
+        if model.dataset_fingerprint == train.fingerprint():
+            return model
+    cfg = TrainConfig(epochs=epochs)
+    tr, va = split_by_group(train.params["trajectory"], cfg.val_fraction, cfg.seed)
+    spec = spec_for_dataset(train, recipe, 64, 64, 16)
+    model, _, _ = train_model(train, spec, cfg, progress=False, train_idx=tr, val_idx=va)
+    save_model(model, path)
+    return model
+
+
+def net_friction(ds, mlps) -> dict[str, np.ndarray]:
+    """The MLPs' own window estimate of <F> (``F_mean_net``) on a data set."""
+    F, a = ds.force_nN.astype(float), ds.params["lattice_nm"]
+    traces = [Trace(ds.x_nm, f, f"t{i}", meta={"lattice_nm": float(ai)})
+              for i, (f, ai) in enumerate(zip(F, a, strict=True))]  # fmt: skip
+    out = {}
+    for name, model in mlps.items():
+        est, _ = predict_traces(model, traces)
+        out[name] = np.array([e.values["F_mean_net"] for e in est])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", type=Path, default=ROOT / "build" / "encoder-vs-mlp")
+    ap.add_argument("--replicas", type=int, default=3)
+    ap.add_argument("--epochs", type=int, default=50)
+    ap.add_argument("--data", type=Path,
+                    default=ROOT / "build" / "line-train" / "randomised_4000_101.h5")  # fmt: skip
+    args = ap.parse_args()
+    t_start = time.perf_counter()
+    args.work.mkdir(parents=True, exist_ok=True)
+    machine = (f"{platform.processor() or platform.machine()}, {platform.system()}, "
+               f"python {platform.python_version()}")  # fmt: skip
+    print(f"machine: {machine}")
+
+    from stickslip.learning.line_model import load_line_model
+
+    if not args.data.exists():
+        make_randomised_set(RandomisedConfig(), args.data)
+    t0 = time.perf_counter()
+    train = randomised_window_set(load_dataset(args.data), replicas=args.replicas)
+    build_s = time.perf_counter() - t0
+    print(f"randomised window set: {train.n} rows ({args.replicas} replicas of "
+          f"{train.n // args.replicas} trajectories), {train.force_nN.shape[1]} reference "
+          f"pixels, {np.mean(train.params['clean']):.1%} clean, "
+          f"built in {build_s:.1f} s")  # fmt: skip
+
+    mlps = {}
+    for r in ("raw", "pi"):
+        if (LAB / f"mlp_{r}.pt").exists():
+            mlps[f"MLP {r} (clean)"] = load_model(LAB / f"mlp_{r}.pt")
+    training = {}
+    for r in ("raw", "pi"):
+        t0 = time.perf_counter()
+        model = dr_window_model(train, args.work, r, args.epochs, args.replicas)
+        tc = model.train_config
+        training[f"MLP {r} (DR)"] = {k: tc.get(k) for k in (
+            "train_seconds", "best_epoch", "n_train_trajectories", "n_val_trajectories",
+            "n_train_windows")}  # fmt: skip
+        print(f"MLP {r} (DR): {tc.get('n_train_windows')} training windows, best epoch "
+              f"{tc.get('best_epoch')}/{args.epochs}, trained in {tc.get('train_seconds', 0):.0f} s"
+              f" ({time.perf_counter() - t0:.0f} s here incl. loading)")  # fmt: skip
+        mlps[f"MLP {r} (DR)"] = model
+    line_model = load_line_model()
+
+    bench_path = LAB / "bench_200.h5"
+    if not bench_path.exists():
+        make_bench(BenchConfig(n_per_material=200), bench_path)
+    sets = {"clean": load_dataset(sweep_if_missing(LAB / "clean.h5", 300, 4242)),
+            "bench": load_dataset(bench_path)}  # fmt: skip
+    summary: dict = {"machine": machine, "args": {k: str(v) for k, v in vars(args).items()},
+                     "training": training, "scores": {}}  # fmt: skip
+    for set_name, ds in sets.items():
+        truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
+        ok = (truth["eta"] >= 1.5) & (truth["eta"] <= 40)
+        preds = predictions(ds, line_model, mlps)
+        f_net = net_friction(ds, mlps)
+        for g, mask in groups(set_name, ds, ok).items():
+            print(f"\n{g}: {int(mask.sum())} traces with 1.5 <= eta <= 40")
+            print(f"{'estimator':<18}{'<F> RMSE nN':>13}{'U0 rel RMSE':>13}{'K rel RMSE':>12}"
+                  f"{'U0 RMSE eV':>12}{'K RMSE N/m':>12}{'<F> net nN':>12}")  # fmt: skip
+            for est, pred in preds.items():
+                s = score(truth, pred, mask)
+                net = ""
+                if est in f_net:
+                    d = (f_net[est] - truth["F_mean_nN"])[mask]
+                    s["F_net_rmse"] = float(np.sqrt(np.nanmean(d**2)))
+                    net = f"{s['F_net_rmse']:>12.4f}"
+                summary["scores"].setdefault(g, {})[est] = s
+                print(f"{est:<18}{s['F_rmse']:>13.4f}{s['U0_eV_rel_rmse']:>13.2%}"
+                      f"{s['K_N_m_rel_rmse']:>12.2%}{s['U0_eV_rmse']:>12.3f}"
+                      f"{s['K_N_m_rmse']:>12.2f}{net}")  # fmt: skip
+    summary["wall_seconds"] = time.perf_counter() - t_start
+    (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"\nwrote {args.work / 'summary.json'} ({summary['wall_seconds']:.0f} s in all)")
+
+
+if __name__ == "__main__":
+    main()
