@@ -1,14 +1,15 @@
 """Train the bundled whole-line model (CNN ensemble with uncertainty), reproducibly.
 
-1. Simulates a domain-randomised training set (stickslip.simulation.randomised: lattices
-   0.235-0.335 nm, 30-90 nm/s, modulated and defective substrates), cached under
-   --work.
+1. Simulates domain-randomised training sets, one per seed (stickslip.simulation.randomised:
+   lattices 0.235-0.335 nm with 30 % exactly on graphite's, 30-90 nm/s, modulated and
+   defective substrates), cached under --work (a cached file is reused only if its
+   stored config is the one asked for).
 2. Trains the ensemble with on-the-fly detector effects (line_training.TRAIN_EFFECTS)
    and calibrates its spread on a held-out split.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
-Usage: python scripts/train_line_model.py [--n 4000] [--seed 101] [--members 3]
-       [--epochs 20] [--work build/line-train] [--out PATH]
+Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--members 3]
+       [--epochs 60] [--work build/line-train] [--out PATH]
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+
+import numpy as np
 
 from stickslip.data.dataset import load_dataset
 from stickslip.learning.line_model import save_line_model
@@ -28,23 +31,29 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4000)
-    ap.add_argument("--seed", type=int, default=101)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
     ap.add_argument("--members", type=int, default=3)
-    ap.add_argument("--epochs", type=int, default=30)
+    ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")
     args = ap.parse_args()
-    rcfg = RandomisedConfig(n=args.n, seed=args.seed)
-    path = args.work / f"randomised_{args.n}_{args.seed}.h5"
-    if not path.exists():
-        make_randomised_set(rcfg, path)
-    data = load_dataset(path)
-    cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seed)
-    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params, cfg)
+    sets, described = [], []
+    for seed in args.seeds:
+        rcfg = RandomisedConfig(n=args.n, seed=seed)
+        path = args.work / f"randomised_{args.n}_{seed}.h5"
+        if path.exists() and load_dataset(path).config_json != rcfg.to_json():
+            path.unlink()  # simulated with other settings: redo
+        if not path.exists():
+            make_randomised_set(rcfg, path)
+        sets.append(load_dataset(path))
+        described.append({"config": rcfg.to_json(), "fingerprint": sets[-1].fingerprint()})
+    force = np.vstack([d.force_nN.astype(float) for d in sets])
+    params = {k: np.concatenate([d.params[k] for d in sets]) for k in sets[0].params}
+    cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0])
+    ens, report = train_line_ensemble(force, sets[0].x_nm, params, cfg)
     report.pop("history")
-    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(),
-                    {"config": rcfg.to_json(), "fingerprint": data.fingerprint()}, report)
+    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), {"sets": described}, report)
     print(json.dumps(report, indent=1))
     print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.2f} MB)")
 

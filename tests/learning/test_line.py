@@ -6,6 +6,7 @@ import torch
 
 from stickslip.data.dataset import load_dataset
 from stickslip.learning.line import (
+    Z95,
     LineCNN,
     LineEnsemble,
     LineSpec,
@@ -14,7 +15,12 @@ from stickslip.learning.line import (
     predict_lines,
 )
 from stickslip.learning.line_model import load_line_model, save_line_model
-from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
+from stickslip.learning.line_training import (
+    LineTrainConfig,
+    balanced_scale,
+    flat_substrate,
+    train_line_ensemble,
+)
 from stickslip.learning.modelfile import ModelFileError
 from stickslip.simulation import PhysicalSettings, simulate
 from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
@@ -97,3 +103,50 @@ def test_training_learns_from_randomised_simulations(tmp_path):
     assert report["val_rel_rmse"]["log_U0_ref"] < 0.45
     assert report["val_rel_rmse"]["log_K_ref"] < 0.45
     assert 0.85 <= report["val_coverage95"]["log_U0_ref"] <= 1.0
+
+
+def test_balanced_scale_weighs_strata_equally():
+    rng = np.random.default_rng(0)
+    # 900 rows of a wide stratum, 100 of a narrow one: an unweighted quantile would be
+    # set by the wide rows alone
+    z = np.abs(np.concatenate([rng.normal(0, 2.0, 900), rng.normal(0, 0.5, 100)]))[:, None]
+    strata = np.repeat([0, 1], [900, 100])
+    c = balanced_scale(z, strata)[0]
+    cov = [np.mean(z[strata == g, 0] / c <= Z95) for g in (0, 1)]
+    assert abs(0.5 * cov[0] + 0.5 * cov[1] - 0.95) < 0.01
+    assert cov[1] > cov[0]
+    # one stratum: the plain 95 % quantile
+    assert np.isclose(balanced_scale(z, np.zeros(1000, int))[0] * Z95,
+                      np.quantile(z, 0.95), rtol=0.02)  # fmt: skip
+
+
+def test_flat_substrate_reads_the_substrate_columns():
+    p = {"U0_eV": np.ones(4), "mod_amplitude": np.array([0.0, 0.1, 0.0, 0.0]),
+         "defect_count": np.array([0, 0, 2, 0])}  # fmt: skip
+    assert flat_substrate(p).tolist() == [True, False, False, True]
+    assert flat_substrate({"U0_eV": np.ones(3)}).all()
+
+
+def test_training_report_separates_pristine_and_corrupted_validation():
+    # hand-made sawtooth lines (no simulation): checks the plumbing, not the accuracy
+    rng = np.random.default_rng(1)
+    n, x = 120, np.arange(300) * LineSpec().pixel_nm
+    a = rng.choice([0.246, 0.28], n)
+    K, U0 = rng.uniform(2, 20, n), rng.uniform(0.5, 3, n)
+    force = np.array([k * a_ * ((x / a_) % 1.0) for k, a_ in zip(K, a, strict=True)])
+    params = {"U0_eV": U0, "K_N_m": K, "F_mean_nN": force.mean(axis=1), "lattice_nm": a,
+              "velocity_nm_per_s": np.full(n, 60.0),
+              "mod_amplitude": np.where(np.arange(n) % 2 == 0, 0.0, 0.2),
+              "defect_count": np.zeros(n, int)}  # fmt: skip
+    cfg = LineTrainConfig(members=1, epochs=1, batch_size=32, val_fraction=0.25, mse_epochs=1)
+    _, report = train_line_ensemble(force, x, params, cfg, LineSpec(crop=200), progress=False)
+    flat_val = report["val_pristine"]["n"]
+    assert report["val_corrupted"]["n"] == 30 and 5 <= flat_val <= 25
+    assert report["n_val"] == 30 + flat_val
+    for stratum in ("val_pristine", "val_corrupted"):
+        assert set(report[stratum]["coverage95"]) == {"F_mean_nN", "log_U0_ref", "log_K_ref",
+                                                      "log_eta"}  # fmt: skip
+    # the two strata weigh equally in the calibration: their coverages average to 95 %
+    for t in ("log_U0_ref", "log_K_ref"):
+        c = [report[s]["coverage95"][t] for s in ("val_pristine", "val_corrupted")]
+        assert abs(np.mean(c) - 0.95) < 0.06

@@ -2,7 +2,8 @@
 
 Parameters are drawn in the reference frame (lattice a0 = 0.246 nm) over a range a bit
 wider than the paper's, each trajectory then gets a lattice spacing ``a`` (uniform over
-``lattice_nm``) with ``U0 = U0_ref (a / a0)^2`` (same eta), a scan velocity from
+``lattice_nm``, or exactly ``a0`` for a ``reference_fraction`` of them) with
+``U0 = U0_ref (a / a0)^2`` (same eta), a scan velocity from
 ``velocities_nm_per_s`` (a few discrete values: one simulator call per velocity), and
 an augmented substrate (modulation and defects) for all but ``clean_fraction`` of them.
 Detector effects are not simulated here: the training pipeline adds them on the fly.
@@ -22,7 +23,7 @@ from tqdm.auto import tqdm
 from stickslip import __version__
 from stickslip.data.dataset import create_dataset_file, write_rows
 from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
-from stickslip.simulation.sampling import sample_parameters, sample_substrate
+from stickslip.simulation.sampling import SubstrateDraw, sample_parameters, sample_substrate
 from stickslip.simulation.simulate import simulate
 from stickslip.units import eta_from
 
@@ -52,6 +53,10 @@ class RandomisedConfig:
         )
     )
     clean_fraction: float = 0.25
+    # lines recorded exactly on the reference lattice (graphite, the most common sample)
+    # need no resampling when mapped, so they look slightly sharper than mapped ones:
+    # the network must see such lines too
+    reference_fraction: float = 0.3
     length_nm: float = 11.0
     pixels: int = 512
     chunk: int = 500
@@ -60,10 +65,12 @@ class RandomisedConfig:
         return json.dumps(dataclasses.asdict(self), sort_keys=True)
 
 
-def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
-                        progress: bool = True) -> Path:  # fmt: skip
-    """Simulate the set into ``out`` (dataset layout of :mod:`stickslip.data.dataset`)."""
-    out = Path(out)
+def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], SubstrateDraw]:
+    """The per-trajectory draws of a randomised set, without simulating it.
+
+    Returns the parameter table (``U0_eV``, ``K_N_m``, ``eta``, ``lattice_nm``,
+    ``velocity_nm_per_s``, ... as stored in the set's file) and the substrate draw.
+    """
     rng = np.random.default_rng([config.seed, 31])
     n = config.n
     U0_ref, K = sample_parameters(config.ranges, n, config.seed, A_REF_NM)
@@ -72,16 +79,30 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     v = rng.choice(np.asarray(config.velocities_nm_per_s, float), n)
     sub = sample_substrate(config.substrate, n, config.seed, span_nm=16.0)
     clean = rng.random(n) < config.clean_fraction
+    if config.reference_fraction > 0:  # drawn last: earlier draws stay as they were
+        on_ref = rng.random(n) < config.reference_fraction
+        a[on_ref] = A_REF_NM
+        U0[on_ref] = U0_ref[on_ref]
     sub.mod_amplitude[clean] = 0.0
     sub.defect_height[clean] = 0.0
-    physics = PhysicalSettings(temperature_K=config.temperature_K, length_nm=config.length_nm,
-                               pixels=config.pixels)  # fmt: skip
     table = {
         "index": np.arange(n), "U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, a),
         "F_mean_nN": np.full(n, np.nan), "lattice_nm": a, "velocity_nm_per_s": v,
         "temperature_K": np.full(n, config.temperature_K), "mod_amplitude": sub.mod_amplitude,
         "defect_count": np.count_nonzero(sub.defect_height, axis=1),
     }  # fmt: skip
+    return table, sub
+
+
+def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
+                        progress: bool = True) -> Path:  # fmt: skip
+    """Simulate the set into ``out`` (dataset layout of :mod:`stickslip.data.dataset`)."""
+    out = Path(out)
+    n = config.n
+    table, sub = draw_randomised(config)
+    U0, K, a, v = (table[k] for k in ("U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s"))
+    physics = PhysicalSettings(temperature_K=config.temperature_K, length_nm=config.length_nm,
+                               pixels=config.pixels)  # fmt: skip
     x_nm = np.arange(physics.pixels) * physics.pixel_nm
     attrs = {"config": config.to_json(), "seed": config.seed, "stickslip_version": __version__,
              "n": n, "pixels": physics.pixels, "kind": "randomised"}  # fmt: skip

@@ -1,0 +1,42 @@
+"""Draws of domain-randomised training sets (no simulation needed)."""
+
+import json
+
+import numpy as np
+
+from stickslip.simulation.randomised import A_REF_NM, RandomisedConfig, draw_randomised
+from stickslip.units import eta_from
+
+
+def test_reference_fraction_puts_lines_exactly_on_the_reference_lattice():
+    cfg = RandomisedConfig(n=4000, seed=7, reference_fraction=0.3)
+    t, _ = draw_randomised(cfg)
+    on_ref = t["lattice_nm"] == A_REF_NM
+    assert abs(on_ref.mean() - 0.3) < 0.03
+    lo, hi = cfg.lattice_nm
+    assert np.all((t["lattice_nm"][~on_ref] >= lo) & (t["lattice_nm"][~on_ref] <= hi))
+    # eta is drawn in the reference frame and kept when a line moves to another lattice
+    assert np.all((t["eta"] >= cfg.ranges.eta[0] * 0.999) & (t["eta"] <= cfg.ranges.eta[1] * 1.001))
+    assert np.allclose(t["eta"], eta_from(t["U0_eV"], t["K_N_m"], t["lattice_nm"]))
+
+
+def test_reference_fraction_leaves_the_other_draws_unchanged():
+    a, _ = draw_randomised(RandomisedConfig(n=500, seed=3, reference_fraction=0.0))
+    b, _ = draw_randomised(RandomisedConfig(n=500, seed=3, reference_fraction=0.4))
+    moved = b["lattice_nm"] != a["lattice_nm"]
+    assert 0.3 < moved.mean() < 0.5
+    for k in ("K_N_m", "velocity_nm_per_s", "mod_amplitude", "defect_count"):
+        assert np.array_equal(a[k], b[k])
+    assert np.array_equal(a["U0_eV"][~moved], b["U0_eV"][~moved])
+
+
+def test_clean_fraction_gives_flat_substrates():
+    t, sub = draw_randomised(RandomisedConfig(n=2000, seed=11, clean_fraction=0.25))
+    flat = (t["mod_amplitude"] == 0) & (t["defect_count"] == 0)
+    assert 0.2 < flat.mean() < 0.35
+    assert np.all(sub.defect_height[flat] == 0)
+
+
+def test_config_round_trips_through_json():
+    cfg = RandomisedConfig(n=10, seed=1)
+    assert json.loads(cfg.to_json())["reference_fraction"] == cfg.reference_fraction
