@@ -17,7 +17,7 @@ exist. "<F> net" is the MLPs' own window estimate of <F> (their "<F>" column is 
 trace's mean, as in lab_bench.py). Writes summary.json into --work.
 
 Usage: python benchmarks/encoder_vs_mlp.py [--work build/encoder-vs-mlp] [--replicas 3]
-       [--epochs 50] [--data build/line-train/randomised_4000_101.h5]
+       [--epochs 50] [--seeds 102 103]   (the bundled line model's training sets)
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import load_dataset
+from stickslip.data.dataset import Dataset, load_dataset
 from stickslip.data.trace import Trace
 from stickslip.evaluation.bench import BenchConfig, make_bench
 from stickslip.learning.inference import predict_traces
@@ -83,8 +83,8 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "encoder-vs-mlp")
     ap.add_argument("--replicas", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=50)
-    ap.add_argument("--data", type=Path,
-                    default=ROOT / "build" / "line-train" / "randomised_4000_101.h5")  # fmt: skip
+    ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
+    ap.add_argument("--n", type=int, default=4000)
     args = ap.parse_args()
     t_start = time.perf_counter()
     args.work.mkdir(parents=True, exist_ok=True)
@@ -94,10 +94,17 @@ def main() -> None:
 
     from stickslip.learning.line_model import load_line_model
 
-    if not args.data.exists():
-        make_randomised_set(RandomisedConfig(), args.data)
+    sets = []
+    for seed in args.seeds:
+        path = ROOT / "build" / "line-train" / f"randomised_{args.n}_{seed}.h5"
+        if not path.exists():
+            make_randomised_set(RandomisedConfig(n=args.n, seed=seed), path)
+        sets.append(load_dataset(path))
+    source = Dataset(np.vstack([d.force_nN for d in sets]), sets[0].x_nm,
+                     {k: np.concatenate([d.params[k] for d in sets]) for k in sets[0].params},
+                     {**sets[0].attrs, "config": json.dumps([d.config_json for d in sets])})
     t0 = time.perf_counter()
-    train = randomised_window_set(load_dataset(args.data), replicas=args.replicas)
+    train = randomised_window_set(source, replicas=args.replicas)
     build_s = time.perf_counter() - t0
     print(f"randomised window set: {train.n} rows ({args.replicas} replicas of "
           f"{train.n // args.replicas} trajectories), {train.force_nN.shape[1]} reference "

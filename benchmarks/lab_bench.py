@@ -9,11 +9,14 @@ from every training seed.
 Estimators: the five-line baseline, the classical estimator, the reference paper's
 MLPs (raw and pi recipes, trained here on 1600 clean paper-preset trajectories) and the
 whole-line CNN ensemble with uncertainty (``--line-model``, default: the bundled one).
-Prints, per data set, RMSE of <F> and relative RMSE of U0, K (1.5 <= eta <= 40), and
-the coverage of the 68 % / 95 % intervals; writes summary.json and reliability plots.
+Data sets: clean paper-preset simulations, the bench, and held-out lines from the line
+model's own training distribution (a randomised set of another seed, with the training
+detector effects). Prints, per data set, RMSE of <F> and relative RMSE of U0, K
+(1.5 <= eta <= 40), and the coverage of the 68 % / 95 % intervals; writes summary.json
+and reliability plots.
 
 Usage: python benchmarks/lab_bench.py [--work build/lab-bench] [--n-per-material 200]
-       [--n-clean 300] [--line-model PATH] [--epochs 50]
+       [--n-clean 300] [--n-randomised 600] [--line-model PATH] [--epochs 50]
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import load_dataset
+from stickslip.data.dataset import Dataset, load_dataset
 from stickslip.data.trace import Trace
 from stickslip.estimation import estimate_array
 from stickslip.estimation import estimator as E
@@ -35,9 +38,12 @@ from stickslip.evaluation.bench import MATERIALS, BenchConfig, make_bench
 from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.line import Z95, predict_raw_lines
+from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig
 from stickslip.learning.modelfile import load_model, save_model
 from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
 from stickslip.learning.workflow import sweep_if_missing
+from stickslip.simulation.instrument import apply_instrument
+from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
@@ -53,6 +59,24 @@ def window_model(work: Path, recipe: str, epochs: int):
     model, _, _ = train_model(train, spec, TrainConfig(epochs=epochs), progress=False)
     save_model(model, path)
     return model
+
+
+def randomised_heldout(work: Path, n: int, seed: int = 201) -> Dataset:
+    """Held-out lines from the line model's own training distribution (cached).
+
+    A randomised set (other seed than any training set) with the training detector
+    effects, one fixed draw, the same fraction left clean. Truth of <F>: the clean mean.
+    """
+    path = work / f"randomised_{n}_{seed}.h5"
+    if not path.exists():
+        make_randomised_set(RandomisedConfig(n=n, seed=seed), path)
+    ds = load_dataset(path)
+    rng = np.random.default_rng([seed, 77])
+    clean = ds.force_nN.astype(float)
+    F, _ = apply_instrument(clean, TRAIN_EFFECTS, rng)
+    keep = rng.random(ds.n) < LineTrainConfig.clean_fraction
+    F[keep] = clean[keep]
+    return Dataset(F, ds.x_nm, ds.params, {**ds.attrs, "kind": "randomised-heldout"})
 
 
 def predictions(ds, line_model, mlps) -> dict[str, dict[str, np.ndarray]]:
@@ -103,6 +127,7 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "lab-bench")
     ap.add_argument("--n-per-material", type=int, default=200)
     ap.add_argument("--n-clean", type=int, default=300)
+    ap.add_argument("--n-randomised", type=int, default=600)
     ap.add_argument("--line-model", type=Path, default=None)
     ap.add_argument("--epochs", type=int, default=50)
     args = ap.parse_args()
@@ -118,7 +143,8 @@ def main() -> None:
     if not bench_path.exists():
         make_bench(BenchConfig(n_per_material=args.n_per_material), bench_path)
     sets = {"clean": load_dataset(sweep_if_missing(args.work / "clean.h5", args.n_clean, 4242)),
-            "bench": load_dataset(bench_path)}  # fmt: skip
+            "bench": load_dataset(bench_path),
+            "randomised held-out": randomised_heldout(args.work, args.n_randomised)}  # fmt: skip
     summary: dict = {}
     for set_name, ds in sets.items():
         truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
@@ -147,7 +173,7 @@ def main() -> None:
             loc = np.log(lp.values[k]) if log else lp.values[k]
             curves[k] = reliability(truth[k][ok], loc[ok], sig[ok], log)
         reliability_plot(curves, f"line CNN calibration: {set_name}",
-                         args.work / f"calibration_{set_name}.png")  # fmt: skip
+                         args.work / f"calibration_{set_name.replace(' ', '_')}.png")  # fmt: skip
     (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(f"\nwrote {args.work / 'summary.json'} and calibration plots")
 

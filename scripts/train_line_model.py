@@ -42,7 +42,7 @@ def main() -> None:
     for seed in args.seeds:
         rcfg = RandomisedConfig(n=args.n, seed=seed)
         path = args.work / f"randomised_{args.n}_{seed}.h5"
-        if path.exists() and load_dataset(path).config_json != rcfg.to_json():
+        if path.exists() and RandomisedConfig.from_json(load_dataset(path).config_json) != rcfg:
             path.unlink()  # simulated with other settings: redo
         if not path.exists():
             make_randomised_set(rcfg, path)

@@ -27,8 +27,9 @@ def test_bench_like_traces(model, tmp_path_factory):
     pred = predict_raw_lines(model, [d.x_nm] * d.n, list(d.force_nN.astype(float)),
                              p["lattice_nm"], p["velocity_nm_per_s"])  # fmt: skip
     rel = {k: np.sqrt(np.mean((pred.values[k] / p[k] - 1) ** 2)) for k in ("U0_eV", "K_N_m")}
-    assert rel["U0_eV"] < 0.12 and rel["K_N_m"] < 0.12, rel
-    assert np.sqrt(np.mean((pred.values["F_mean_nN"] - p["F_mean_nN"]) ** 2)) < 0.06
+    # bench (600 traces): 5.2 % and 3.2 %, <F> 0.020 nN; 45 traces scatter more
+    assert rel["U0_eV"] < 0.09 and rel["K_N_m"] < 0.07, rel
+    assert np.sqrt(np.mean((pred.values["F_mean_nN"] - p["F_mean_nN"]) ** 2)) < 0.04
     for k in ("U0_eV", "K_N_m"):
         assert coverage(p[k], pred.lo95[k], pred.hi95[k]) >= 0.85
 
@@ -39,6 +40,7 @@ def test_clean_paper_traces(model):
     n = U0.size
     pred = predict_raw_lines(model, [r.x_nm] * n, list(r.force_nN), np.full(n, 0.246),
                              np.full(n, 60.0))  # fmt: skip
-    assert np.sqrt(np.mean((pred.values["U0_eV"] - U0) ** 2)) < 0.15
-    assert np.sqrt(np.mean((pred.values["K_N_m"] / K - 1) ** 2)) < 0.08
+    # 300 clean traces: 0.059 eV and 1.7 %
+    assert np.sqrt(np.mean((pred.values["U0_eV"] - U0) ** 2)) < 0.10
+    assert np.sqrt(np.mean((pred.values["K_N_m"] / K - 1) ** 2)) < 0.035
     assert coverage(U0, pred.lo95["U0_eV"], pred.hi95["U0_eV"]) >= 0.9

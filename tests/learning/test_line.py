@@ -150,3 +150,4 @@ def test_training_report_separates_pristine_and_corrupted_validation():
     for t in ("log_U0_ref", "log_K_ref"):
         c = [report[s]["coverage95"][t] for s in ("val_pristine", "val_corrupted")]
         assert abs(np.mean(c) - 0.95) < 0.06
+

@@ -40,3 +40,12 @@ def test_clean_fraction_gives_flat_substrates():
 def test_config_round_trips_through_json():
     cfg = RandomisedConfig(n=10, seed=1)
     assert json.loads(cfg.to_json())["reference_fraction"] == cfg.reference_fraction
+
+
+def test_config_read_back_from_json_including_older_files():
+    cfg = RandomisedConfig(n=10, seed=1)
+    assert RandomisedConfig.from_json(cfg.to_json()) == cfg
+    old = json.loads(cfg.to_json())
+    del old["reference_fraction"]  # a file written before the field existed
+    back = RandomisedConfig.from_json(json.dumps(old))
+    assert back.reference_fraction == 0.0 and back.ranges == cfg.ranges

@@ -196,6 +196,23 @@ class LinePrediction:
     hi95: dict[str, np.ndarray]
 
 
+def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
+                      batch: int = 2048) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Standardised predictive mean and std (N, n_targets) of mapped lines, each read
+    whole: lines of equal length are batched together."""
+    n = len(lines)
+    mu = np.empty((n, len(TARGETS)))
+    sd = np.empty((n, len(TARGETS)))
+    sizes = np.array([f.size for f in lines])
+    for size in np.unique(sizes):
+        idx = np.flatnonzero(sizes == size)
+        for start in range(0, idx.size, batch):
+            sel = idx[start : start + batch]
+            X = line_inputs([lines[i] for i in sel], ens.spec)
+            mu[sel], sd[sel] = ens.predict_std(X, cond[sel])
+    return mu, sd
+
+
 def predict_lines(
     ens: LineEnsemble,
     lines: list[np.ndarray],
@@ -211,18 +228,10 @@ def predict_lines(
     together; each is read whole (no crop).
     """
     n = len(lines)
-    mu = np.empty((n, len(TARGETS)))
-    sd = np.empty((n, len(TARGETS)))
-    sizes = np.array([f.size for f in lines])
     a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
     v = np.broadcast_to(np.asarray(velocity_nm_per_s, float), (n,))
-    for size in np.unique(sizes):
-        idx = np.flatnonzero(sizes == size)
-        for start in range(0, idx.size, batch):
-            sel = idx[start : start + batch]
-            X = line_inputs([lines[i] for i in sel], ens.spec)
-            C = conditioning(a[sel], v[sel], ens.spec)
-            mu[sel], sd[sel] = ens.predict(X, C)
+    mu, sd = predict_std_lines(ens, lines, conditioning(a, v, ens.spec), batch)
+    mu, sd = mu * ens.y_std + ens.y_mean, sd * ens.y_std
     s = a / ens.spec.lattice_nm
     shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
     out = LinePrediction({}, {}, {}, {}, {}, {})

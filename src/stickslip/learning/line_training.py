@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 
 from stickslip.learning.line import (
     TARGETS,
+    Z68,
     Z95,
     LineCNN,
     LineEnsemble,
@@ -39,6 +40,7 @@ from stickslip.learning.line import (
     gaussian_nll,
     line_inputs,
     map_line,
+    predict_std_lines,
 )
 from stickslip.simulation.instrument import InstrumentEffects, apply_instrument
 from stickslip.units import eta_from
@@ -86,23 +88,30 @@ def line_targets(U0_eV, K_N_m, F_mean_nN, lattice_nm, spec: LineSpec) -> np.ndar
     )
 
 
-def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, rng,
-                  crop: int | None, clean_fraction: float = 0.0,
-                  keep_clean: np.ndarray | None = None):  # fmt: skip
-    """Corrupt, map and stack a batch (a ``clean_fraction`` of traces, and those marked
-    in ``keep_clean``, left clean).
-
-    Returns the input and conditioning tensors and the mean of each corrupted trace
-    (the friction target is the clean mean minus it: see :data:`TARGETS`).
-    """
+def corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng, clean_fraction=0.0,
+                    keep_clean: np.ndarray | None = None):  # fmt: skip
+    """Corrupt a batch (a ``clean_fraction`` of traces, and those marked in
+    ``keep_clean``, left clean) and map it: the mapped lines and each corrupted trace's
+    mean (the friction target is the clean mean minus it: see :data:`TARGETS`)."""
     F, _ = apply_instrument(force_nN, effects, rng)
     clean = rng.random(F.shape[0]) < clean_fraction
     if keep_clean is not None:
         clean |= keep_clean
     F[clean] = force_nN[clean]
     lines = [map_line(x_nm, f, a, spec) for f, a in zip(F, lattice_nm, strict=True)]
+    return lines, F.mean(axis=1)
+
+
+def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, rng,
+                  crop: int | None, clean_fraction: float = 0.0,
+                  keep_clean: np.ndarray | None = None):  # fmt: skip
+    """:func:`corrupt_and_map`, then stacked: input and conditioning tensors (lines
+    cropped to ``crop``, at random, or centred on the shortest when None) and the
+    corrupted traces' means."""
+    lines, observed = corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng,
+                                      clean_fraction, keep_clean)  # fmt: skip
     X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
-    return X, conditioning(lattice_nm, velocity_nm_per_s, spec), F.mean(axis=1)
+    return X, conditioning(lattice_nm, velocity_nm_per_s, spec), observed
 
 
 def flat_substrate(params: dict[str, np.ndarray]) -> np.ndarray:
@@ -137,6 +146,96 @@ def _standardise_friction(Y: np.ndarray, observed_mean: np.ndarray, y_mean, y_st
     return torch.from_numpy(((Y - y_mean) / y_std).astype(np.float32))
 
 
+def split(n: int, config: LineTrainConfig, rng: np.random.Generator):
+    """(validation, training) trajectory indices: the first draw of the training rng."""
+    perm = rng.permutation(n)
+    n_val = max(1, int(round(config.val_fraction * n)))
+    return perm[:n_val], perm[n_val:]
+
+
+@dataclass
+class ValidationSet:
+    """Held-out lines as the network sees them, in two strata.
+
+    ``lines`` are the mapped lines, whole (calibration reads them as inference does),
+    ``X`` the same cropped to a common length (to follow the loss while training), ``C``
+    the conditioning, ``rows`` the source trajectories (the flat-substrate ones twice),
+    ``strata`` 0 for a corrupted line (drawn like training ones, same clean fraction)
+    and 1 for a pristine one, ``observed_mean`` each input line's mean force.
+    """
+
+    lines: list[np.ndarray]
+    X: torch.Tensor
+    C: torch.Tensor
+    rows: np.ndarray
+    strata: np.ndarray
+    observed_mean: np.ndarray
+
+
+def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
+                   spec: LineSpec) -> ValidationSet:  # fmt: skip
+    """The validation lines of :func:`train_line_ensemble` (one fixed draw of effects)."""
+    val_rng = np.random.default_rng([config.seed, 999])
+    val_p = val[flat_substrate(params)[val]]
+    a = params["lattice_nm"]
+    corrupted, mean_c = corrupt_and_map(force_nN[val], a[val], x_nm, spec, config.effects,
+                                        val_rng, config.clean_fraction)  # fmt: skip
+    pristine, mean_p = corrupt_and_map(force_nN[val_p], a[val_p], x_nm, spec, config.effects,
+                                       val_rng, keep_clean=np.ones(val_p.size, bool))  # fmt: skip
+    rows = np.concatenate([val, val_p])
+    lines = corrupted + pristine
+    return ValidationSet(
+        lines=lines,
+        X=line_inputs(lines, spec),
+        C=conditioning(a[rows], params["velocity_nm_per_s"][rows], spec),
+        rows=rows,
+        strata=np.repeat([0, 1], [val.size, val_p.size]),
+        observed_mean=np.concatenate([mean_c, mean_p]),
+    )
+
+
+def calibrate(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray):
+    """Fit ``ens.scale`` on a validation set (targets ``Y_val`` in :func:`line_targets`
+    units; strata weighing equally, :func:`balanced_scale`); returns the standardised
+    predictive means and the calibrated ``|z|`` of every validation line."""
+    ens.scale = np.ones(len(TARGETS))
+    mu, sd = predict_std_lines(ens, vs.lines, vs.C)
+    Yv = _standardise_friction(Y_val, vs.observed_mean, ens.y_mean, ens.y_std).numpy()
+    z = np.abs(mu - Yv) / sd
+    ens.scale = balanced_scale(z, vs.strata)
+    return mu, z / ens.scale
+
+
+def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray) -> dict:
+    """Calibrate ``ens`` on a validation set (:func:`calibrate`) and report its errors and
+    interval coverage there, overall and per stratum (corrupted, pristine)."""
+    mu, z_cal = calibrate(ens, vs, Y_val)
+    pred = mu * ens.y_std + ens.y_mean
+    pred[:, 0] += vs.observed_mean
+    rel = np.exp(pred[:, 1:] - Y_val[:, 1:]) - 1.0
+
+    def named(values) -> dict:
+        names = TARGETS if len(values) == len(TARGETS) else TARGETS[1:]
+        return dict(zip(names, np.asarray(values).tolist(), strict=True))
+
+    report = {
+        "val_rmse_F_mean_nN": float(np.sqrt(np.mean((pred[:, 0] - Y_val[:, 0]) ** 2))),
+        "val_rel_rmse": named(np.sqrt(np.mean(rel**2, axis=0))),
+        "val_coverage95": named(np.mean(z_cal <= Z95, axis=0)),
+        "val_coverage68": named(np.mean(z_cal <= Z68, axis=0)),
+        "calibration_scale": named(ens.scale),
+    }
+    for g, name in ((0, "corrupted"), (1, "pristine")):
+        m = vs.strata == g
+        report[f"val_{name}"] = {
+            "n": int(m.sum()),
+            "rel_rmse": named(np.sqrt(np.mean(rel[m] ** 2, axis=0))),
+            "coverage95": named(np.mean(z_cal[m] <= Z95, axis=0)),
+            "coverage68": named(np.mean(z_cal[m] <= Z68, axis=0)),
+        }
+    return report
+
+
 def train_line_ensemble(
     force_nN: np.ndarray,
     x_nm: np.ndarray,
@@ -159,34 +258,16 @@ def train_line_ensemble(
     """
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    n = force_nN.shape[0]
-    perm = rng.permutation(n)
-    n_val = max(1, int(round(config.val_fraction * n)))
-    val, train = perm[:n_val], perm[n_val:]
+    val, train = split(force_nN.shape[0], config, rng)
     a, v = params["lattice_nm"], params["velocity_nm_per_s"]
     Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"], a, spec)
-    val_rng = np.random.default_rng([config.seed, 999])
-    flat = flat_substrate(params)
-    flat_train = train[flat[train]]
-    # validation: every held-out trace corrupted like training ones (same clean
-    # fraction), once; then the flat-substrate ones again, pristine
-    val_p = val[flat[val]]
-    Xc, Cc, mean_c = prepare_batch(force_nN[val], a[val], v[val], x_nm, spec, config.effects,
-                                   val_rng, crop=None,
-                                   clean_fraction=config.clean_fraction)  # fmt: skip
-    Xp, Cp, mean_p = prepare_batch(force_nN[val_p], a[val_p], v[val_p], x_nm, spec,
-                                   config.effects, val_rng, crop=None,
-                                   keep_clean=np.ones(val_p.size, bool))  # fmt: skip
-    L = min(Xc.shape[-1], Xp.shape[-1])  # each is centred on its lines: trim to match
-    Xv = torch.cat([X[..., (X.shape[-1] - L) // 2 :][..., :L] for X in (Xc, Xp)])
-    Cv = torch.cat([Cc, Cp])
-    mean_v = np.concatenate([mean_c, mean_p])
-    strata = np.repeat([0, 1], [val.size, val_p.size])  # 0 corrupted, 1 pristine
-    val = np.concatenate([val, val_p])
+    flat_train = train[flat_substrate(params)[train]]
     # friction: the network predicts the correction to the observed mean (~ the offset)
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
-    Yv = _standardise_friction(Y[val], mean_v, y_mean, y_std)
+    vs = validation_set(force_nN, x_nm, params, val, config, spec)
+    Xv, Cv = vs.X, vs.C
+    Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
     members, history = [], []
     steps_per_epoch = max(1, train.size // config.batch_size)
     t0 = time.perf_counter()
@@ -233,31 +314,11 @@ def train_line_ensemble(
             bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
         members.append(net)
     ens = LineEnsemble(members=members, spec=spec, y_mean=y_mean, y_std=y_std)
-    mu, sd = ens.predict_std(Xv, Cv)
-    z = (mu - Yv.numpy()) / sd
-    ens.scale = balanced_scale(np.abs(z), strata)
-    pred = mu * y_std + y_mean
-    pred[:, 0] += mean_v
-    truth = Y[val]
-    rel = np.exp(pred[:, 1:] - truth[:, 1:]) - 1.0
-    z_cal = np.abs(z) / ens.scale
     report = {
-        "val_rmse_F_mean_nN": float(np.sqrt(np.mean((pred[:, 0] - truth[:, 0]) ** 2))),
-        "val_rel_rmse": dict(zip(TARGETS[1:], np.sqrt(np.mean(rel**2, axis=0)).tolist(),
-                                 strict=True)),  # fmt: skip
-        "val_coverage95": dict(zip(TARGETS, np.mean(z_cal <= Z95, axis=0).tolist(), strict=True)),
-        "val_coverage68": dict(zip(TARGETS, np.mean(z_cal <= 1.0, axis=0).tolist(), strict=True)),
-        **{f"val_{name}": {
-            "n": int(np.sum(strata == g)),
-            "rel_rmse": dict(zip(TARGETS[1:], np.sqrt(np.mean(rel[strata == g] ** 2, axis=0))
-                                 .tolist(), strict=True)),
-            "coverage95": dict(zip(TARGETS, np.mean(z_cal[strata == g] <= Z95, axis=0)
-                                   .tolist(), strict=True)),
-        } for g, name in ((0, "corrupted"), (1, "pristine"))},
+        **calibrate_and_report(ens, vs, Y[vs.rows]),
         "history": history,
         "train_seconds": time.perf_counter() - t0,
         "n_train": int(train.size),
-        "n_val": int(val.size),
-        "calibration_scale": dict(zip(TARGETS, ens.scale.tolist(), strict=True)),
+        "n_val": int(vs.rows.size),
     }
     return ens, report

@@ -64,6 +64,19 @@ class RandomisedConfig:
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), sort_keys=True)
 
+    @classmethod
+    def from_json(cls, text: str) -> RandomisedConfig:
+        """The config stored in a set's file (fields added later take the value that
+        files written before them were made with: no lines on the reference lattice)."""
+        d = {"reference_fraction": 0.0, **json.loads(text)}
+
+        def tuples(sub: dict) -> dict:
+            return {k: tuple(v) if isinstance(v, list) else v for k, v in sub.items()}
+
+        d["ranges"] = ParameterRange(**tuples(d["ranges"]))
+        d["substrate"] = SubstrateAugmentation(**tuples(d["substrate"]))
+        return cls(**tuples(d))
+
 
 def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], SubstrateDraw]:
     """The per-trajectory draws of a randomised set, without simulating it.
