@@ -9,7 +9,7 @@
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--members 3]
-       [--epochs 60] [--work build/line-train] [--out PATH]
+       [--epochs 45] [--work build/line-train] [--out PATH]
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=4000)
     ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
     ap.add_argument("--members", type=int, default=3)
-    ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--epochs", type=int, default=45)
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")

@@ -61,7 +61,7 @@ class LineTrainConfig:
     """Settings of a line-model training run (saved in the model file)."""
 
     members: int = 3
-    epochs: int = 60
+    epochs: int = 45
     batch_size: int = 128
     lr: float = 3e-3
     weight_decay: float = 1e-4
