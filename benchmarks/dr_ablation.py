@@ -21,7 +21,7 @@ from stickslip.data.dataset import load_dataset
 from stickslip.evaluation.bench import BenchConfig, make_bench
 from stickslip.learning.line import predict_raw_lines
 from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig, train_line_ensemble
-from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
 EFFECTS = ("white_nN", "pink_nN", "lowpass_px", "drift_nN", "softening")
@@ -36,14 +36,10 @@ def main() -> None:
     # the setup of the recorded ablation (docs/robustness.md): seed-101 set with no lines
     # on the reference lattice, no pristine oversampling
     rcfg = RandomisedConfig(seed=101, reference_fraction=0.0)
-    path = args.work / f"randomised_{rcfg.n}_{rcfg.seed}.h5"
-    if path.exists() and RandomisedConfig.from_json(load_dataset(path).config_json) != rcfg:
-        path = args.work / f"randomised_{rcfg.n}_{rcfg.seed}_ablation.h5"
-    if not path.exists():
-        make_randomised_set(rcfg, path)
+    data = cached_randomised_set(rcfg, args.work)
     if not args.bench.exists():
         make_bench(BenchConfig(), args.bench)
-    data, bench = load_dataset(path), load_dataset(args.bench)
+    bench = load_dataset(args.bench)
     p = bench.params
     ok = (p["eta"] >= 1.5) & (p["eta"] <= 40)
     variants = {"all effects": (TRAIN_EFFECTS, 0.2), "none (clean training)": (TRAIN_EFFECTS, 1.0)}

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import Dataset, load_dataset
+from stickslip.data.dataset import concat_datasets, load_dataset
 from stickslip.data.trace import Trace
 from stickslip.evaluation.bench import BenchConfig, make_bench
 from stickslip.learning.inference import predict_traces
@@ -42,7 +42,7 @@ from stickslip.learning.randomised_windows import (
 )
 from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
 from stickslip.learning.workflow import sweep_if_missing
-from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
 from lab_bench import groups, predictions, score  # noqa: E402
@@ -94,15 +94,9 @@ def main() -> None:
 
     from stickslip.learning.line_model import load_line_model
 
-    sets = []
-    for seed in args.seeds:
-        path = ROOT / "build" / "line-train" / f"randomised_{args.n}_{seed}.h5"
-        if not path.exists():
-            make_randomised_set(RandomisedConfig(n=args.n, seed=seed), path)
-        sets.append(load_dataset(path))
-    source = Dataset(np.vstack([d.force_nN for d in sets]), sets[0].x_nm,
-                     {k: np.concatenate([d.params[k] for d in sets]) for k in sets[0].params},
-                     {**sets[0].attrs, "config": json.dumps([d.config_json for d in sets])})
+    source = concat_datasets([
+        cached_randomised_set(RandomisedConfig(n=args.n, seed=s), ROOT / "build" / "line-train")
+        for s in args.seeds])  # fmt: skip
     t0 = time.perf_counter()
     train = randomised_window_set(source, replicas=args.replicas)
     build_s = time.perf_counter() - t0

@@ -43,7 +43,7 @@ from stickslip.learning.modelfile import load_model, save_model
 from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
 from stickslip.learning.workflow import sweep_if_missing
 from stickslip.simulation.instrument import apply_instrument
-from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
@@ -67,10 +67,7 @@ def randomised_heldout(work: Path, n: int, seed: int = 201) -> Dataset:
     A randomised set (other seed than any training set) with the training detector
     effects, one fixed draw, the same fraction left clean. Truth of <F>: the clean mean.
     """
-    path = work / f"randomised_{n}_{seed}.h5"
-    if not path.exists():
-        make_randomised_set(RandomisedConfig(n=n, seed=seed), path)
-    ds = load_dataset(path)
+    ds = cached_randomised_set(RandomisedConfig(n=n, seed=seed), work)
     rng = np.random.default_rng([seed, 77])
     clean = ds.force_nN.astype(float)
     F, _ = apply_instrument(clean, TRAIN_EFFECTS, rng)

@@ -18,12 +18,10 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from stickslip.data.dataset import load_dataset
+from stickslip.data.dataset import concat_datasets
 from stickslip.learning.line_model import save_line_model
 from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
-from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
+from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,20 +36,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")
     args = ap.parse_args()
-    sets, described = [], []
-    for seed in args.seeds:
-        rcfg = RandomisedConfig(n=args.n, seed=seed)
-        path = args.work / f"randomised_{args.n}_{seed}.h5"
-        if path.exists() and RandomisedConfig.from_json(load_dataset(path).config_json) != rcfg:
-            path.unlink()  # simulated with other settings: redo
-        if not path.exists():
-            make_randomised_set(rcfg, path)
-        sets.append(load_dataset(path))
-        described.append({"config": rcfg.to_json(), "fingerprint": sets[-1].fingerprint()})
-    force = np.vstack([d.force_nN.astype(float) for d in sets])
-    params = {k: np.concatenate([d.params[k] for d in sets]) for k in sets[0].params}
+    sets = [cached_randomised_set(RandomisedConfig(n=args.n, seed=s), args.work)
+            for s in args.seeds]  # fmt: skip
+    described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
+    data = concat_datasets(sets)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0])
-    ens, report = train_line_ensemble(force, sets[0].x_nm, params, cfg)
+    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params, cfg)
     report.pop("history")
     save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), {"sets": described}, report)
     print(json.dumps(report, indent=1))

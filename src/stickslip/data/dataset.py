@@ -136,3 +136,28 @@ def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None
         raise
     except (OSError, KeyError) as e:
         raise DatasetError(f"{p}: unreadable dataset ({e})") from None
+
+
+def concat_datasets(sets: list[Dataset]) -> Dataset:
+    """Rows of several datasets on one position grid, in order, as one dataset.
+
+    ``attrs["config"]`` becomes the JSON list of the parts' configs.
+
+    Raises
+    ------
+    DatasetError
+        If the parts have different positions or parameter columns.
+    """
+    import json
+
+    first = sets[0]
+    for d in sets[1:]:
+        if not np.array_equal(d.x_nm, first.x_nm) or set(d.params) != set(first.params):
+            raise DatasetError("datasets to join differ in positions or parameter columns")
+    return Dataset(
+        force_nN=np.vstack([d.force_nN for d in sets]),
+        x_nm=first.x_nm,
+        params={k: np.concatenate([d.params[k] for d in sets]) for k in first.params},
+        attrs={**first.attrs, "n": sum(d.n for d in sets),
+               "config": json.dumps([d.config_json for d in sets])},  # fmt: skip
+    )

@@ -21,7 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from stickslip import __version__
-from stickslip.data.dataset import create_dataset_file, write_rows
+from stickslip.data.dataset import Dataset, create_dataset_file, load_dataset, write_rows
 from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
 from stickslip.simulation.sampling import SubstrateDraw, sample_parameters, sample_substrate
 from stickslip.simulation.simulate import simulate
@@ -135,3 +135,13 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
                    {"F_mean_nN": res.force_nN.mean(axis=1)})  # fmt: skip
     os.replace(part, out)
     return out
+
+
+def cached_randomised_set(config: RandomisedConfig, work: str | os.PathLike,
+                          progress: bool = True) -> Dataset:  # fmt: skip
+    """The set ``work/randomised_{n}_{seed}.h5``, simulated first if it is missing or was
+    made with other settings than ``config``."""
+    path = Path(work) / f"randomised_{config.n}_{config.seed}.h5"
+    if not path.exists() or RandomisedConfig.from_json(load_dataset(path).config_json) != config:
+        make_randomised_set(config, path, progress)  # replaces the file only when done
+    return load_dataset(path)
