@@ -5,11 +5,16 @@
    defective substrates), cached under --work (a cached file is reused only if its
    stored config is the one asked for).
 2. Trains the ensemble with on-the-fly detector effects (line_training.TRAIN_EFFECTS)
-   and calibrates its spread on a held-out split.
+   and calibrates its spread on a held-out split. The members read an expert input and
+   learn when to trust it (stickslip.learning.line): by default the paper's pi MLP
+   trained on clean paper-preset simulations (the bundled window model's data and
+   recipe, without its noise augmentation: the most precise expert on a clean line,
+   and plainly wrong on a noisy one), trained here and cached; --expert bundled reads
+   the bundled window model, --expert none trains without.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--members 3]
-       [--epochs 45] [--work build/line-train] [--out PATH]
+       [--epochs 45] [--expert clean|bundled|none|PATH] [--work build/line-train] [--out PATH]
 """
 
 from __future__ import annotations
@@ -18,12 +23,28 @@ import argparse
 import json
 from pathlib import Path
 
-from stickslip.data.dataset import concat_datasets
+from stickslip.data.dataset import concat_datasets, load_dataset
 from stickslip.learning.line_model import save_line_model
 from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
+from stickslip.learning.modelfile import TrainedModel, load_model, save_model
+from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.learning.workflow import sweep_if_missing
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
+EXPERT_SEED, EXPERT_N = 0, 1600  # the bundled window model's training data
+
+
+def clean_expert(work: Path) -> TrainedModel:
+    """The paper's pi MLP trained on clean paper-preset simulations (cached in ``work``)."""
+    path = work / "expert_pi_clean.pt"
+    if path.exists():
+        return load_model(path)
+    data = load_dataset(sweep_if_missing(work / "paper_train.h5", EXPERT_N, EXPERT_SEED))
+    spec = spec_for_dataset(data, "pi", 64, 64, 16)
+    model, _, _ = train_model(data, spec, TrainConfig(epochs=50, seed=0, noise_nN=0.0))
+    save_model(model, path)
+    return model
 
 
 def main() -> None:
@@ -32,6 +53,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
     ap.add_argument("--members", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=45)
+    ap.add_argument("--expert", default="clean",
+                    help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")
@@ -41,9 +64,17 @@ def main() -> None:
     described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
     data = concat_datasets(sets)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0])
-    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params, cfg)
+    expert = {"none": lambda: None, "bundled": lambda: load_model(None),
+              "clean": lambda: clean_expert(args.work)}.get(
+        args.expert, lambda: load_model(Path(args.expert)))()  # fmt: skip
+    data_card = {"sets": described}
+    if expert is not None:
+        data_card["expert"] = {"model": args.expert,
+                               "dataset_fingerprint": expert.dataset_fingerprint}
+    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params, cfg,
+                                      expert=expert)  # fmt: skip
     report.pop("history")
-    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), {"sets": described}, report)
+    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), data_card, report)
     print(json.dumps(report, indent=1))
     print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.2f} MB)")
 

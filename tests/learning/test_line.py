@@ -6,10 +6,12 @@ import torch
 
 from stickslip.data.dataset import load_dataset
 from stickslip.learning.line import (
+    N_EXPERT,
     Z95,
     LineCNN,
     LineEnsemble,
     LineSpec,
+    expert_inputs,
     line_inputs,
     map_line,
     predict_lines,
@@ -21,7 +23,7 @@ from stickslip.learning.line_training import (
     flat_substrate,
     train_line_ensemble,
 )
-from stickslip.learning.modelfile import ModelFileError
+from stickslip.learning.modelfile import ModelFileError, load_model
 from stickslip.simulation import PhysicalSettings, simulate
 from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
 
@@ -151,3 +153,74 @@ def test_training_report_separates_pristine_and_corrupted_validation():
         c = [report[s]["coverage95"][t] for s in ("val_pristine", "val_corrupted")]
         assert abs(np.mean(c) - 0.95) < 0.06
 
+
+
+def test_gate_passes_the_expert_through_or_ignores_it():
+    torch.manual_seed(0)
+    net = LineCNN(n_expert=N_EXPERT).eval()
+    X, C = torch.randn(3, 2, 128), torch.zeros(3, 2)
+    E = torch.randn(3, N_EXPERT)
+    last = net.head[-1]
+    t = net.n_targets
+    with torch.no_grad():
+        last.bias[2 * t :] = 40.0  # gate open: the expert's U0', K', eta are the output
+        m_open, _ = net(X, C, E)
+        last.bias[2 * t :] = -40.0  # gate shut: the CNN's own estimate
+        m_shut, _ = net(X, C, E)
+        m_shut2, _ = net(X, C, E + 1.0)  # the expert moves only through the head's input
+    torch.testing.assert_close(m_open[:, 1:], E[:, :3])
+    torch.testing.assert_close(m_open[:, 0], m_shut[:, 0])  # friction is never gated
+    assert not torch.allclose(m_shut[:, 1:], E[:, :3])
+    assert not torch.allclose(m_shut, m_shut2)
+    with pytest.raises(ValueError, match="expert"):
+        net(X, C)
+
+
+def test_expert_inputs_read_the_paper_mlp_estimate_of_a_clean_line():
+    expert = load_model(None)  # the bundled window model (paper's pi MLP)
+    U0, K = np.array([1.0, 3.0]), np.array([5.0, 20.0])
+    r = simulate(U0, K, seed=3)
+    spec = LineSpec()
+    y_mean, y_std = np.array([0.0, 0.5, 2.0, 1.5]), np.array([0.05, 0.8, 0.9, 0.9])
+    E = expert_inputs(expert, line_inputs(list(r.force_nN), spec), spec, y_mean, y_std).numpy()
+    assert E.shape == (2, N_EXPERT)
+    U0_e = np.exp(E[:, 0] * y_std[1] + y_mean[1])
+    K_e = np.exp(E[:, 1] * y_std[2] + y_mean[2])
+    # the expert's own held-out error on such lines is ~1 %
+    np.testing.assert_allclose(U0_e, U0, rtol=0.05)
+    np.testing.assert_allclose(K_e, K, rtol=0.08)
+    # eta implied by the expert's U0', K' on the reference lattice
+    eta_e = np.exp(E[:, 2] * y_std[3] + y_mean[3])
+    np.testing.assert_allclose(eta_e, r.eta, rtol=0.12)
+
+
+def test_line_model_with_expert_round_trips(tmp_path):
+    torch.manual_seed(0)
+    ens = _untrained()
+    ens.members = [LineCNN(n_expert=N_EXPERT) for _ in range(2)]
+    ens.expert = load_model(None)
+    path = save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {})
+    back = load_line_model(path)
+    assert back.expert is not None and back.members[0].n_expert == N_EXPERT
+    X = line_inputs([np.linspace(0, 3, 300)], ens.spec)
+    C = torch.zeros(1, 2)
+    np.testing.assert_allclose(back.predict(X, C)[0], ens.predict(X, C)[0], rtol=1e-5)
+
+
+def test_training_with_an_expert_fits_the_gate_and_the_own_mean():
+    # plumbing on hand-made sawtooth lines: the members read the expert, and the model
+    # file written afterwards predicts as the trained ensemble does
+    rng = np.random.default_rng(2)
+    n, x = 64, np.arange(300) * LineSpec().pixel_nm
+    K, U0 = rng.uniform(2, 20, n), rng.uniform(0.5, 3, n)
+    force = np.array([k * 0.246 * ((x / 0.246) % 1.0) for k in K])
+    params = {"U0_eV": U0, "K_N_m": K, "F_mean_nN": force.mean(axis=1),
+              "lattice_nm": np.full(n, 0.246), "velocity_nm_per_s": np.full(n, 60.0)}  # fmt: skip
+    cfg = LineTrainConfig(members=1, epochs=2, batch_size=16, val_fraction=0.25, mse_epochs=1)
+    ens, report = train_line_ensemble(force, x, params, cfg, LineSpec(crop=200), progress=False,
+                                      expert=load_model(None))  # fmt: skip
+    assert ens.members[0].n_expert == N_EXPERT and ens.expert is not None
+    assert np.isfinite(report["history"][-1]["loss"])
+    with pytest.raises(ValueError, match="lattice and pixel"):
+        train_line_ensemble(force, x, params, cfg, LineSpec(crop=200, pixel_nm=0.03),
+                            progress=False, expert=load_model(None))  # fmt: skip

@@ -18,6 +18,15 @@ trained with the Gaussian negative log-likelihood, each member reports how sure 
 An ensemble of members gives the predictive mean and variance (mean of the members'
 variances plus the variance of their means); a per-target scale factor fitted on
 held-out simulations calibrates it.
+
+Expert input (optional). The paper's window MLP, trained on clean simulations, is very
+precise on a clean line like its training ones and wrong on a corrupted one. A model
+with an ``expert`` reads that MLP's estimate of the line (:func:`expert_inputs`: the
+mean over its windows of U0', K' and the implied eta, with their spread over windows)
+beside the CNN features, and outputs, per target, a gate ``g`` in (0, 1) with the
+mean ``m + g (e - m)`` (``m`` the CNN's own estimate, ``e`` the expert's). The gate is
+learned on the randomised training lines, so the network decides from the line itself
+when the expert can be trusted; its spread head sees the expert too.
 """
 
 from __future__ import annotations
@@ -30,10 +39,14 @@ import torch
 from torch import nn
 
 from stickslip.learning.features import resample_mean
+from stickslip.learning.inference import predict_windows
+from stickslip.learning.modelfile import TrainedModel
+from stickslip.units import eta_from
 
 TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
 Z68, Z95 = 0.994458, 1.959964  # two-sided 68.27 % and 95 % Gaussian quantiles
 INFER_CHUNK = 512
+N_EXPERT = 5  # expert inputs: U0', K', eta estimates and the windows' spread of U0', K'
 
 
 @dataclass(frozen=True)
@@ -93,10 +106,11 @@ def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
 
 
 class LineCNN(nn.Module):
-    """Strided 1D CNN, global mean+max pooling, conditioning, Gaussian heads."""
+    """Strided 1D CNN, global mean+max pooling, conditioning, Gaussian heads; with
+    ``n_expert`` > 0, expert inputs and a gate per target (see the module notes)."""
 
     def __init__(self, channels=(16, 32, 48, 64), n_cond: int = 2, n_targets: int = 4,
-                 hidden: int = 128):  # fmt: skip
+                 hidden: int = 128, n_expert: int = 0):  # fmt: skip
         super().__init__()
         layers: list[nn.Module] = []
         cin = 2
@@ -106,10 +120,12 @@ class LineCNN(nn.Module):
                        nn.ReLU()]  # fmt: skip
             cin = c
         self.body = nn.Sequential(*layers)
+        n_out = (3 if n_expert else 2) * n_targets
         self.head = nn.Sequential(
-            nn.Linear(2 * cin + n_cond, hidden), nn.ReLU(), nn.Linear(hidden, 2 * n_targets)
+            nn.Linear(2 * cin + n_cond + n_expert, hidden), nn.ReLU(), nn.Linear(hidden, n_out)
         )
         self.n_targets = n_targets
+        self.n_expert = n_expert
 
     def fused(self) -> LineCNN:
         """An inference copy with each batch norm folded into its convolution."""
@@ -129,12 +145,56 @@ class LineCNN(nn.Module):
         out.body = nn.Sequential(*body)
         return out
 
-    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-variance (B, n_targets) in standardised units."""
+        mean, log_var, _ = self.parts(x, cond, expert)
+        return mean, log_var
+
+    def parts(
+        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, log-variance and the CNN's own (ungated) mean: training fits the own mean
+        too, so that it stays an estimate of the targets rather than a correction that
+        only makes sense mixed with the expert's."""
         h = self.body(x)
-        h = torch.cat([h.mean(-1), h.amax(-1), cond], dim=1)
-        out = self.head(h)
-        mean, log_var = out[:, : self.n_targets], out[:, self.n_targets :]
-        return mean, log_var.clamp(-12.0, 6.0)
+        parts = [h.mean(-1), h.amax(-1), cond]
+        if self.n_expert:
+            if expert is None:
+                raise ValueError("this network reads expert inputs: pass expert=")
+            parts.append(expert)
+        out = self.head(torch.cat(parts, dim=1))
+        t = self.n_targets
+        own, log_var = out[:, :t], out[:, t : 2 * t]
+        mean = own
+        if self.n_expert:
+            # the expert estimates the last targets (U0', K', eta), not the friction
+            e = torch.cat([own[:, : t - 3], expert[:, :3]], dim=1)
+            mean = own + torch.sigmoid(out[:, 2 * t :]) * (e - own)
+        return mean, log_var.clamp(-12.0, 6.0), own
+
+
+def expert_inputs(expert: TrainedModel, X: torch.Tensor, spec: LineSpec,
+                  y_mean: np.ndarray, y_std: np.ndarray) -> torch.Tensor:  # fmt: skip
+    """Expert inputs (B, :data:`N_EXPERT`) of stacked lines (:func:`line_inputs`).
+
+    The window model reads the force channel of ``X`` (the line the CNN reads, on the
+    reference lattice and pixel); its per-line estimate is the mean over windows (as
+    in the paper). Returned: ln U0', ln K' and ln eta of that estimate in the line
+    model's standardised target units (clipped to +-5 so that nonsense far outside the
+    expert's training range stays bounded), then ln of the windows' standard deviation
+    of ln U0' and ln K'.
+    """
+    F = X[:, 0].numpy().astype(np.float64) * spec.force_scale_nN
+    est = predict_windows(expert, F)  # (B, W, targets), physical
+    U0 = np.clip(est[..., expert.targets.index("U0_eV")], 1e-3, None)
+    K = np.clip(est[..., expert.targets.index("K_N_m")], 1e-2, None)
+    lu, lk = np.log(U0.mean(axis=1)), np.log(K.mean(axis=1))
+    le = np.log(eta_from(np.exp(lu), np.exp(lk), spec.lattice_nm))
+    e = (np.column_stack([lu, lk, le]) - y_mean[-3:]) / y_std[-3:]
+    spread = np.log(np.column_stack([np.log(U0).std(axis=1), np.log(K).std(axis=1)]) + 1e-3)
+    return torch.from_numpy(np.column_stack([np.clip(e, -5.0, 5.0), spread]).astype(np.float32))
 
 
 def gaussian_nll(mean, log_var, y, beta: float = 0.5) -> torch.Tensor:
@@ -155,6 +215,13 @@ class LineEnsemble:
     y_mean: np.ndarray
     y_std: np.ndarray
     scale: np.ndarray = field(default_factory=lambda: np.ones(len(TARGETS)))
+    expert: TrainedModel | None = None
+
+    def expert_for(self, X: torch.Tensor) -> torch.Tensor | None:
+        """The members' expert inputs for ``X`` (None for a model without an expert)."""
+        if self.expert is None:
+            return None
+        return expert_inputs(self.expert, X, self.spec, self.y_mean, self.y_std)
 
     @torch.inference_mode()
     def predict_std(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
@@ -162,11 +229,13 @@ class LineEnsemble:
         # batch norm folded, and chunks small enough for the activations to stay in
         # cache: about 5x faster on a CPU than one big batch
         fused = [m.fused() for m in self.members]
+        E = self.expert_for(X)
         means = np.empty((len(fused), X.shape[0], len(TARGETS)), np.float32)
         variances = np.empty_like(means)
         for k, m in enumerate(fused):
             for i in range(0, X.shape[0], INFER_CHUNK):
-                mu, lv = m(X[i : i + INFER_CHUNK], C[i : i + INFER_CHUNK])
+                sl = slice(i, i + INFER_CHUNK)
+                mu, lv = m(X[sl], C[sl], None if E is None else E[sl])
                 means[k, i : i + INFER_CHUNK] = mu.numpy()
                 variances[k, i : i + INFER_CHUNK] = lv.exp().numpy()
         means_a = means

@@ -12,6 +12,8 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data
     metrics             validation metrics recorded at training time
+    n_expert            expert inputs of each member (0, or absent: none)
+    expert              the window-model payload the members read (absent: none)
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import torch
 from stickslip import __version__
 from stickslip.data.atomic import atomic_path
 from stickslip.learning.line import TARGETS, LineCNN, LineEnsemble, LineSpec
-from stickslip.learning.modelfile import ModelFileError, _major, _plain
+from stickslip.learning.modelfile import ModelFileError, _major, _plain, from_payload
 
 FORMAT = "stickslip-line-model-1"
 BUNDLED = "line_model.pt"
@@ -49,6 +51,9 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
         "dataset": _plain(dataset),
         "metrics": _plain(metrics),
     }
+    if ens.expert is not None:
+        payload["n_expert"] = ens.members[0].n_expert
+        payload["expert"] = ens.expert.to_payload()
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
@@ -65,9 +70,13 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
         )
     try:
         spec = LineSpec(**payload["spec"])
+        expert = None
+        if "expert" in payload:
+            expert = from_payload(payload["expert"], f"{name} (expert)")
         members = []
         for sd in payload["members"]:
-            net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS))
+            net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS),
+                          n_expert=int(payload.get("n_expert", 0)))  # fmt: skip
             net.load_state_dict(sd)
             net.eval()
             members.append(net)
@@ -77,6 +86,7 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             y_mean=payload["y_mean"].numpy(),
             y_std=payload["y_std"].numpy(),
             scale=payload["scale"].numpy(),
+            expert=expert,
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
@@ -112,7 +122,7 @@ def load_any_model(path: str | os.PathLike | None = None):
     bundled window model.
     """
     from stickslip.learning.modelfile import FORMAT as WINDOW_FORMAT
-    from stickslip.learning.modelfile import from_payload, load_model, read_payload
+    from stickslip.learning.modelfile import load_model, read_payload
 
     if path is None:
         from importlib.resources import files

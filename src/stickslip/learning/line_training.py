@@ -30,6 +30,7 @@ import torch
 from tqdm.auto import tqdm
 
 from stickslip.learning.line import (
+    N_EXPERT,
     TARGETS,
     Z68,
     Z95,
@@ -42,6 +43,7 @@ from stickslip.learning.line import (
     map_line,
     predict_std_lines,
 )
+from stickslip.learning.modelfile import TrainedModel
 from stickslip.simulation.instrument import InstrumentEffects, apply_instrument
 from stickslip.units import eta_from
 
@@ -70,6 +72,7 @@ class LineTrainConfig:
     clean_fraction: float = 0.2  # traces left without detector effects, so the model
     # also learns how sure it can be on a clean line
     pristine_fraction: float = 0.25  # of each batch: flat substrate and no effects
+    own_weight: float = 0.5  # weight of the CNN's own mean in the loss (with an expert)
     val_fraction: float = 0.1
     seed: int = 0
     channels: tuple[int, ...] = (16, 32, 48, 64)
@@ -243,6 +246,7 @@ def train_line_ensemble(
     config: LineTrainConfig = LineTrainConfig(),
     spec: LineSpec = LineSpec(),
     progress: bool = True,
+    expert: TrainedModel | None = None,
 ) -> tuple[LineEnsemble, dict]:
     """Train an ensemble on simulated traces; returns it and a report (losses, metrics).
 
@@ -255,7 +259,15 @@ def train_line_ensemble(
     params : dict
         Per-trace ``U0_eV``, ``K_N_m``, ``F_mean_nN``, ``lattice_nm``,
         ``velocity_nm_per_s``.
+    expert : TrainedModel, optional
+        A window model whose estimates the members read and gate (see
+        :mod:`stickslip.learning.line`); it must read the reference lattice and pixel.
     """
+    if expert is not None and (
+        not np.isclose(expert.features.pixel_nm, spec.pixel_nm)
+        or not np.isclose(expert.features.lattice_nm, spec.lattice_nm)
+    ):
+        raise ValueError("the expert must read lines on the line model's lattice and pixel")
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     val, train = split(force_nN.shape[0], config, rng)
@@ -266,13 +278,14 @@ def train_line_ensemble(
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
     vs = validation_set(force_nN, x_nm, params, val, config, spec)
-    Xv, Cv = vs.X, vs.C
+    ens = LineEnsemble(members=[], spec=spec, y_mean=y_mean, y_std=y_std, expert=expert)
+    Xv, Cv, Ev = vs.X, vs.C, ens.expert_for(vs.X)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
-    members, history = [], []
+    history = []
     steps_per_epoch = max(1, train.size // config.batch_size)
     t0 = time.perf_counter()
     for k in range(config.members):
-        net = LineCNN(channels=config.channels)
+        net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0)
         opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         sched = torch.optim.lr_scheduler.OneCycleLR(
             opt, max_lr=config.lr, total_steps=config.epochs * steps_per_epoch
@@ -294,12 +307,15 @@ def train_line_ensemble(
                                           config.effects, rng, crop=spec.crop,
                                           clean_fraction=config.clean_fraction,
                                           keep_clean=keep)  # fmt: skip
-                mean, log_var = net(X, C)
+                mean, log_var, own = net.parts(X, C, ens.expert_for(X))
                 y = _standardise_friction(Y[idx], obs, y_mean, y_std)
                 if epoch < config.mse_epochs:
                     loss = ((mean - y) ** 2).sum(dim=1).mean()
                 else:
                     loss = gaussian_nll(mean, log_var, y, config.beta)
+                if net.n_expert:  # the own mean must stay an estimate (LineCNN.parts)
+                    loss = loss + config.own_weight * gaussian_nll(own, log_var.detach(), y,
+                                                                   config.beta)  # fmt: skip
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
@@ -307,13 +323,12 @@ def train_line_ensemble(
                 total += loss.item()
             net.eval()
             with torch.inference_mode():
-                mv, _ = net(Xv, Cv)
+                mv, _ = net(Xv, Cv, Ev)
                 val_mse = float(((mv - Yv) ** 2).mean())
             history.append({"member": k, "epoch": epoch, "loss": total / steps_per_epoch,
                             "val_mse": val_mse})  # fmt: skip
             bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
-        members.append(net)
-    ens = LineEnsemble(members=members, spec=spec, y_mean=y_mean, y_std=y_std)
+        ens.members.append(net)
     report = {
         **calibrate_and_report(ens, vs, Y[vs.rows]),
         "history": history,
