@@ -39,9 +39,7 @@ from stickslip.evaluation.calibration import coverage, reliability, reliability_
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.line import Z95, predict_raw_lines
 from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig
-from stickslip.learning.modelfile import load_model, save_model
-from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import sweep_if_missing
+from stickslip.learning.workflow import clean_window_model, sweep_if_missing
 from stickslip.simulation.instrument import apply_instrument
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
@@ -51,14 +49,8 @@ KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
 
 def window_model(work: Path, recipe: str, epochs: int):
     """The paper's MLP for a recipe, trained on clean paper-preset data (cached)."""
-    path = work / f"mlp_{recipe}.pt"
-    if path.exists():
-        return load_model(path)
-    train = load_dataset(sweep_if_missing(work / "train.h5", 1600, 10))
-    spec = spec_for_dataset(train, recipe, 64, 64, 16)
-    model, _, _ = train_model(train, spec, TrainConfig(epochs=epochs), progress=False)
-    save_model(model, path)
-    return model
+    return clean_window_model(work / f"mlp_{recipe}.pt", work / "train.h5", 1600, 10, recipe,
+                              epochs, progress=False)  # fmt: skip
 
 
 def randomised_heldout(work: Path, n: int, seed: int = 201) -> Dataset:

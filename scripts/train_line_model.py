@@ -23,12 +23,11 @@ import argparse
 import json
 from pathlib import Path
 
-from stickslip.data.dataset import concat_datasets, load_dataset
+from stickslip.data.dataset import concat_datasets
 from stickslip.learning.line_model import save_line_model
 from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
-from stickslip.learning.modelfile import TrainedModel, load_model, save_model
-from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import sweep_if_missing
+from stickslip.learning.modelfile import TrainedModel, load_model
+from stickslip.learning.workflow import clean_window_model
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,14 +36,8 @@ EXPERT_SEED, EXPERT_N = 0, 1600  # the bundled window model's training data
 
 def clean_expert(work: Path) -> TrainedModel:
     """The paper's pi MLP trained on clean paper-preset simulations (cached in ``work``)."""
-    path = work / "expert_pi_clean.pt"
-    if path.exists():
-        return load_model(path)
-    data = load_dataset(sweep_if_missing(work / "paper_train.h5", EXPERT_N, EXPERT_SEED))
-    spec = spec_for_dataset(data, "pi", 64, 64, 16)
-    model, _, _ = train_model(data, spec, TrainConfig(epochs=50, seed=0, noise_nN=0.0))
-    save_model(model, path)
-    return model
+    return clean_window_model(work / "expert_pi_clean.pt", work / "paper_train.h5", EXPERT_N,
+                              EXPERT_SEED)  # fmt: skip
 
 
 def main() -> None:

@@ -236,11 +236,10 @@ class LineEnsemble:
             for i in range(0, X.shape[0], INFER_CHUNK):
                 sl = slice(i, i + INFER_CHUNK)
                 mu, lv = m(X[sl], C[sl], None if E is None else E[sl])
-                means[k, i : i + INFER_CHUNK] = mu.numpy()
-                variances[k, i : i + INFER_CHUNK] = lv.exp().numpy()
-        means_a = means
-        var = np.mean(variances, axis=0) + means_a.var(axis=0)
-        return means_a.mean(axis=0), np.sqrt(var) * self.scale
+                means[k, sl] = mu.numpy()
+                variances[k, sl] = lv.exp().numpy()
+        var = np.mean(variances, axis=0) + means.var(axis=0)
+        return means.mean(axis=0), np.sqrt(var) * self.scale
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""

@@ -154,3 +154,28 @@ def sweep_if_missing(
     if path.exists() and read_attrs(path).get("config") == cfg.to_json():
         return path
     return run_sweep(cfg, path)
+
+
+def clean_window_model(path: str | os.PathLike, train_path: str | os.PathLike, n: int,
+                       seed: int, recipe: str = "pi", epochs: int = 50,
+                       progress: bool = True) -> TrainedModel:  # fmt: skip
+    """The paper's MLP for ``recipe`` (window 64, stride 64, train stride 16) trained on
+    ``n`` clean paper-preset trajectories of ``seed``, without noise augmentation.
+
+    The trajectories are simulated into ``train_path`` if missing (:func:`sweep_if_missing`);
+    the model is cached in ``path`` and reused while its training data is the same.
+    """
+    from stickslip.data.dataset import load_dataset
+    from stickslip.learning.modelfile import load_model
+    from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
+
+    train = load_dataset(sweep_if_missing(train_path, n, seed))
+    path = Path(path)
+    if path.exists():
+        model = load_model(path)
+        if model.dataset_fingerprint == train.fingerprint():
+            return model
+    spec = spec_for_dataset(train, recipe, 64, 64, 16)
+    model, _, _ = train_model(train, spec, TrainConfig(epochs=epochs, seed=0), progress=progress)
+    save_model(model, path)
+    return model
