@@ -3,7 +3,10 @@
 1. Simulates domain-randomised training sets, one per seed (stickslip.simulation.randomised:
    lattices 0.235-0.335 nm with 30 % exactly on graphite's, 30-90 nm/s, modulated and
    defective substrates), cached under --work (a cached file is reused only if its
-   stored config is the one asked for).
+   stored config is the one asked for), plus --paper clean paper-preset trajectories
+   (graphite lattice, 60 nm/s, flat substrate: the expert's own conditions, so the
+   members learn how far to trust it there and how small their spread can be; seed
+   --paper-seed, apart from the expert's and the benchmarks' seeds).
 2. Trains the ensemble with on-the-fly detector effects (line_training.TRAIN_EFFECTS)
    and calibrates its spread on a held-out split. The members read an expert input and
    learn when to trust it (stickslip.learning.line): by default the paper's pi MLP
@@ -13,8 +16,9 @@
    the bundled window model, --expert none trains without.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
-Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--members 3]
-       [--epochs 45] [--expert clean|bundled|none|PATH] [--work build/line-train] [--out PATH]
+Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--paper 1600]
+       [--paper-seed 5] [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
+       [--work build/line-train] [--out PATH]
 """
 
 from __future__ import annotations
@@ -23,11 +27,13 @@ import argparse
 import json
 from pathlib import Path
 
-from stickslip.data.dataset import concat_datasets
+import numpy as np
+
+from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
 from stickslip.learning.line_model import save_line_model
 from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
 from stickslip.learning.modelfile import TrainedModel, load_model
-from stickslip.learning.workflow import clean_window_model
+from stickslip.learning.workflow import clean_window_model, sweep_if_missing
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,10 +46,20 @@ def clean_expert(work: Path) -> TrainedModel:
                               EXPERT_SEED)  # fmt: skip
 
 
+def paper_lines(work: Path, n: int, seed: int) -> Dataset:
+    """Clean paper-preset trajectories (cached), with the randomised sets' defect count."""
+    ds = load_dataset(sweep_if_missing(work / f"paper_{n}_{seed}.h5", n, seed))
+    ds.params["defect_count"] = np.count_nonzero(ds.params["defect_height_U0"], axis=1)
+    return ds
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4000)
     ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
+    ap.add_argument("--paper", type=int, default=1600,
+                    help="clean paper-preset trajectories added to the training data")
+    ap.add_argument("--paper-seed", type=int, default=5)
     ap.add_argument("--members", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=45)
     ap.add_argument("--expert", default="clean",
@@ -54,8 +70,13 @@ def main() -> None:
     args = ap.parse_args()
     sets = [cached_randomised_set(RandomisedConfig(n=args.n, seed=s), args.work)
             for s in args.seeds]  # fmt: skip
+    columns = sorted(sets[0].params)
+    if args.paper:
+        if args.paper_seed in (EXPERT_SEED, 1, 10, 4242):  # expert, its held-out, benchmarks
+            ap.error("--paper-seed must differ from the expert's and the benchmarks' seeds")
+        sets.append(paper_lines(args.work, args.paper, args.paper_seed))
     described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
-    data = concat_datasets(sets)
+    data = concat_datasets(sets, columns)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0])
     expert = {"none": lambda: None, "bundled": lambda: load_model(None),
               "clean": lambda: clean_expert(args.work)}.get(

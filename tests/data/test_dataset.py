@@ -25,3 +25,14 @@ def test_concat_keeps_row_order_and_records_every_config():
 def test_concat_refuses_different_grids():
     with pytest.raises(DatasetError):
         concat_datasets([_ds(2, 1.0), _ds(2, 1.0, x=np.arange(6.0))])
+
+
+def test_concat_on_named_columns_drops_the_others_and_needs_them_everywhere():
+    a, b = _ds(2, 1.0), _ds(1, 7.0)
+    b.params["mass_kg"] = np.ones(1)
+    with pytest.raises(DatasetError):
+        concat_datasets([a, b])
+    d = concat_datasets([a, b], columns=["U0_eV"])
+    assert sorted(d.params) == ["U0_eV"] and d.params["U0_eV"].tolist() == [1, 2, 7]
+    with pytest.raises(DatasetError):
+        concat_datasets([a, b], columns=["U0_eV", "mass_kg"])

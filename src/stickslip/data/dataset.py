@@ -138,10 +138,12 @@ def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None
         raise DatasetError(f"{p}: unreadable dataset ({e})") from None
 
 
-def concat_datasets(sets: list[Dataset]) -> Dataset:
+def concat_datasets(sets: list[Dataset], columns: list[str] | None = None) -> Dataset:
     """Rows of several datasets on one position grid, in order, as one dataset.
 
-    ``attrs["config"]`` becomes the JSON list of the parts' configs.
+    ``attrs["config"]`` becomes the JSON list of the parts' configs. With ``columns``,
+    only those parameter columns are kept (each part must have them), so sets written by
+    different simulators (sweeps, randomised sets) can be joined.
 
     Raises
     ------
@@ -151,13 +153,15 @@ def concat_datasets(sets: list[Dataset]) -> Dataset:
     import json
 
     first = sets[0]
-    for d in sets[1:]:
-        if not np.array_equal(d.x_nm, first.x_nm) or set(d.params) != set(first.params):
+    keep = list(first.params) if columns is None else list(columns)
+    for d in sets:
+        names = set(d.params) if columns is None else set(d.params) & set(keep)
+        if not np.array_equal(d.x_nm, first.x_nm) or names != set(keep):
             raise DatasetError("datasets to join differ in positions or parameter columns")
     return Dataset(
         force_nN=np.vstack([d.force_nN for d in sets]),
         x_nm=first.x_nm,
-        params={k: np.concatenate([d.params[k] for d in sets]) for k in first.params},
+        params={k: np.concatenate([d.params[k] for d in sets]) for k in keep},
         attrs={**first.attrs, "n": sum(d.n for d in sets),
                "config": json.dumps([d.config_json for d in sets])},  # fmt: skip
     )
