@@ -41,7 +41,7 @@ from stickslip.learning.randomised_windows import (
     split_by_group,
 )
 from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import sweep_if_missing
+from stickslip.learning.workflow import CLEAN_TEST_SEED, sweep_if_missing
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
@@ -126,7 +126,7 @@ def main() -> None:
     bench_path = LAB / "bench_200.h5"
     if not bench_path.exists():
         make_bench(BenchConfig(n_per_material=200), bench_path)
-    sets = {"clean": load_dataset(sweep_if_missing(LAB / "clean.h5", 300, 4242)),
+    sets = {"clean": load_dataset(sweep_if_missing(LAB / "clean.h5", 300, CLEAN_TEST_SEED)),
             "bench": load_dataset(bench_path)}  # fmt: skip
     summary: dict = {"machine": machine, "args": {k: str(v) for k, v in vars(args).items()},
                      "training": training, "scores": {}}  # fmt: skip

@@ -39,7 +39,12 @@ from stickslip.evaluation.calibration import coverage, reliability, reliability_
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.line import Z95, predict_raw_lines
 from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig
-from stickslip.learning.workflow import clean_window_model, sweep_if_missing
+from stickslip.learning.workflow import (
+    CLEAN_TEST_SEED,
+    LAB_MLP_SEED,
+    clean_window_model,
+    sweep_if_missing,
+)
 from stickslip.simulation.instrument import apply_instrument
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
@@ -49,8 +54,8 @@ KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
 
 def window_model(work: Path, recipe: str, epochs: int):
     """The paper's MLP for a recipe, trained on clean paper-preset data (cached)."""
-    return clean_window_model(work / f"mlp_{recipe}.pt", work / "train.h5", 1600, 10, recipe,
-                              epochs, progress=False)  # fmt: skip
+    return clean_window_model(work / f"mlp_{recipe}.pt", work / "train.h5", 1600, LAB_MLP_SEED,
+                              recipe, epochs, progress=False)  # fmt: skip
 
 
 def randomised_heldout(work: Path, n: int, seed: int = 201) -> Dataset:
@@ -131,7 +136,8 @@ def main() -> None:
     bench_path = args.work / f"bench_{args.n_per_material}.h5"
     if not bench_path.exists():
         make_bench(BenchConfig(n_per_material=args.n_per_material), bench_path)
-    sets = {"clean": load_dataset(sweep_if_missing(args.work / "clean.h5", args.n_clean, 4242)),
+    clean = sweep_if_missing(args.work / "clean.h5", args.n_clean, CLEAN_TEST_SEED)
+    sets = {"clean": load_dataset(clean),
             "bench": load_dataset(bench_path),
             "randomised held-out": randomised_heldout(args.work, args.n_randomised)}  # fmt: skip
     summary: dict = {}

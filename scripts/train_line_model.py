@@ -33,11 +33,16 @@ from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
 from stickslip.learning.line_model import save_line_model
 from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
 from stickslip.learning.modelfile import TrainedModel, load_model
-from stickslip.learning.workflow import clean_window_model, sweep_if_missing
+from stickslip.learning.workflow import (
+    PAPER_TRAIN_SEED,
+    RESERVED_SEEDS,
+    clean_window_model,
+    sweep_if_missing,
+)
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPERT_SEED, EXPERT_N = 0, 1600  # the bundled window model's training data
+EXPERT_SEED, EXPERT_N = PAPER_TRAIN_SEED, 1600  # the bundled window model's training data
 
 
 def clean_expert(work: Path) -> TrainedModel:
@@ -72,7 +77,7 @@ def main() -> None:
             for s in args.seeds]  # fmt: skip
     columns = sorted(sets[0].params)
     if args.paper:
-        if args.paper_seed in (EXPERT_SEED, 1, 10, 4242):  # expert, its held-out, benchmarks
+        if args.paper_seed in RESERVED_SEEDS:
             ap.error("--paper-seed must differ from the expert's and the benchmarks' seeds")
         sets.append(paper_lines(args.work, args.paper, args.paper_seed))
     described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
