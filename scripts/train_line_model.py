@@ -67,6 +67,10 @@ def main() -> None:
     ap.add_argument("--paper-seed", type=int, default=5)
     ap.add_argument("--members", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=45)
+    ap.add_argument("--beta", type=float, default=LineTrainConfig.beta,
+                    help="beta-NLL weight of the means' gradient")
+    ap.add_argument("--beta-var", type=float, default=LineTrainConfig.beta_var,
+                    help="beta-NLL weight of the variances' gradient")
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
@@ -82,7 +86,8 @@ def main() -> None:
         sets.append(paper_lines(args.work, args.paper, args.paper_seed))
     described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
     data = concat_datasets(sets, columns)
-    cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0])
+    cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0],
+                          beta=args.beta, beta_var=args.beta_var)
     expert = {"none": lambda: None, "bundled": lambda: load_model(None),
               "clean": lambda: clean_expert(args.work)}.get(
         args.expert, lambda: load_model(Path(args.expert)))()  # fmt: skip

@@ -12,6 +12,7 @@ from stickslip.learning.line import (
     LineEnsemble,
     LineSpec,
     expert_inputs,
+    gaussian_nll,
     line_inputs,
     map_line,
     predict_lines,
@@ -105,6 +106,28 @@ def test_training_learns_from_randomised_simulations(tmp_path):
     assert report["val_rel_rmse"]["log_U0_ref"] < 0.45
     assert report["val_rel_rmse"]["log_K_ref"] < 0.45
     assert 0.85 <= report["val_coverage95"]["log_U0_ref"] <= 1.0
+
+
+def test_split_beta_nll_weighs_mean_and_variance_gradients_separately():
+    g = torch.Generator().manual_seed(0)
+    y = torch.randn(64, 4, generator=g)
+    mean0 = torch.randn(64, 4, generator=g)
+    log_var0 = torch.randn(64, 4, generator=g)
+
+    def grads(beta, beta_var):
+        mean, log_var = mean0.clone().requires_grad_(), log_var0.clone().requires_grad_()
+        gaussian_nll(mean, log_var, y, beta, beta_var).backward()
+        return mean.grad, log_var.grad
+
+    v, sq = log_var0.exp(), (y - mean0) ** 2
+    gm, gv = grads(0.5, 0.0)
+    # mean: the beta-NLL gradient, var^beta (mean - y) / var; log-variance: plain NLL
+    assert torch.allclose(gm, v**0.5 * (mean0 - y) / v / 64, rtol=1e-5, atol=1e-7)
+    assert torch.allclose(gv, 0.5 * (1 - sq / v) / 64, rtol=1e-5, atol=1e-7)
+    # equal weights take the one-weight path: same gradients as beta-NLL
+    gm_same, gv_same = grads(0.5, 0.5)
+    assert torch.allclose(gm_same, gm) and not torch.allclose(gv_same, gv)
+    assert torch.allclose(gv_same, v**0.5 * 0.5 * (1 - sq / v) / 64, rtol=1e-5, atol=1e-7)
 
 
 def test_balanced_scale_weighs_strata_equally():

@@ -67,7 +67,8 @@ class LineTrainConfig:
     batch_size: int = 128
     lr: float = 3e-3
     weight_decay: float = 1e-4
-    beta: float = 0.5
+    beta: float = 0.5  # beta-NLL weight of the means' gradient (gaussian_nll)
+    beta_var: float = 0.0  # ... of the variances': each line pulls on its variance equally
     mse_epochs: int = 2
     clean_fraction: float = 0.2  # traces left without detector effects, so the model
     # also learns how sure it can be on a clean line
@@ -312,7 +313,7 @@ def train_line_ensemble(
                 if epoch < config.mse_epochs:
                     loss = ((mean - y) ** 2).sum(dim=1).mean()
                 else:
-                    loss = gaussian_nll(mean, log_var, y, config.beta)
+                    loss = gaussian_nll(mean, log_var, y, config.beta, config.beta_var)
                 if net.n_expert:  # the own mean must stay an estimate (LineCNN.parts)
                     loss = loss + config.own_weight * gaussian_nll(own, log_var.detach(), y,
                                                                    config.beta)  # fmt: skip
