@@ -51,6 +51,17 @@ def test_infer_reports_bad_files_and_processes_the_rest(traces, tmp_path):
     assert len(list((tmp_path / "plots").glob("*.png"))) == 2
 
 
+def test_infer_empty_argument_is_reported_not_read_as_the_current_folder(
+    traces, tmp_path, monkeypatch
+):
+    monkeypatch.chdir(traces)  # "" must not read good0/good1 again from here
+    out = tmp_path / "res.csv"
+    r = _run(["infer", "good0.csv", "", "--out", out])
+    assert r.exit_code == 1, r.output
+    assert _errors(r) == ["stickslip: error: '': empty path"]
+    assert [row["trace"] for row in csv.DictReader(out.open())] == ["good0"]
+
+
 def test_infer_bad_model_files_give_one_line(traces, tmp_path):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"garbage" * 50)

@@ -45,6 +45,15 @@ def test_csv_nN_roundtrip(tmp_path):
     np.testing.assert_allclose(t.force_nN, np.sin(np.arange(N)), rtol=1e-8)
 
 
+def test_empty_path_is_an_error_not_the_current_folder(tmp_path, monkeypatch):
+    good = tmp_path / "a.csv"
+    write_trace_csv(good, np.arange(64) * 0.02, np.sin(np.arange(64.0)))
+    monkeypatch.chdir(tmp_path)  # "" must not read a.csv a second time from here
+    traces, errors = collect_traces([good, ""])
+    assert len(traces) == 1
+    assert [str(e) for e in errors] == ["'': empty path"]
+
+
 def test_csv_without_columns_names_the_needed_ones(tmp_path):
     p = _write(tmp_path / "b.csv", "a,b\n" + "\n".join(f"{i},{i}" for i in range(N)))
     with pytest.raises(TraceReadError, match="x_nm,force_nN"):

@@ -85,7 +85,7 @@ def _describe_traces(traces: list[Trace]) -> list[str]:
 
 @app.command("inspect")
 def inspect_cmd(
-    files: list[Path] = typer.Argument(..., help="Files or folders to describe."),
+    files: list[str] = typer.Argument(..., help="Files or folders to describe."),
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
     lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
     loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
@@ -95,8 +95,11 @@ def inspect_cmd(
 ) -> None:
     """Show channels, scan size, rate, setpoint and the traces a file would give."""
     opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads), scan_size_nm)
-    failed = 0
-    for p in expand_paths(files):
+    paths, bad = expand_paths(files)
+    for e in bad:
+        error(str(e))
+    failed = len(bad)
+    for p in paths:
         try:
             out = [f"{p}"]
             if is_scan_file(p):
@@ -142,7 +145,7 @@ def _csv_text(rows: list[dict[str, Any]], unit: str) -> str:
 
 @app.command("friction-load")
 def friction_load_cmd(
-    files: list[Path] = typer.Argument(..., help="Friction maps or loops (files or folders)."),
+    files: list[str] = typer.Argument(..., help="Friction maps or loops (files or folders)."),
     out: Path = typer.Option(..., "--out", help="Plot of friction versus load (PNG, PDF, SVG)."),
     csv_out: Path | None = typer.Option(None, "--csv", help="Also write the table as CSV."),
     loads: str | None = typer.Option(
@@ -158,11 +161,13 @@ def friction_load_cmd(
     load_list = parse_loads_arg(loads)
     opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
                            None, load_unit)
-    paths = expand_paths(files)
+    paths, bad = expand_paths(files)
+    for e in bad:
+        error(str(e))
     if load_list and not lines_per_load and len(load_list) != len(paths):
         usage_error(f"--loads gives {len(load_list)} values for {len(paths)} files")
     rows: list[dict[str, Any]] = []
-    failed = 0
+    failed = len(bad)
     for i, p in enumerate(paths):
         try:
             traces = read_file(p, **opts)

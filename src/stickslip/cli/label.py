@@ -22,7 +22,7 @@ from stickslip.cli.main import app
 
 @app.command("label")
 def label(
-    traces: list[Path] = typer.Argument(
+    traces: list[str] = typer.Argument(
         ..., help="Trace files (x_nm,force_nN CSV, or any readable format) or folders of them."
     ),
     out: Path = typer.Option(..., "--out", help="Labels CSV to write (one row per trace)."),

@@ -94,7 +94,7 @@ def train_cmd(
 
 @app.command("infer")
 def infer_cmd(
-    traces: list[Path] = typer.Argument(..., help="Trace files or folders."),
+    traces: list[str] = typer.Argument(..., help="Trace files or folders."),
     out: Path = typer.Option(..., "--out", "-o", help="Result table (CSV)."),
     model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     lattice: float | None = typer.Option(

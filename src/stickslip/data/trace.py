@@ -116,16 +116,25 @@ def write_trace_csv(path: str | os.PathLike, x_nm: np.ndarray, force_nN: np.ndar
             np.savetxt(fh, np.column_stack([x_nm, force_nN]), delimiter=",", fmt="%.9g")
 
 
-def expand_paths(paths: Iterable[str | os.PathLike]) -> list[Path]:
-    """Expand folders into the trace files they hold (sorted); files are kept as given."""
+def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[TraceReadError]]:
+    """Expand folders into the trace files they hold (sorted); files are kept as given.
+
+    Returns the paths and one error per empty argument: ``Path("")`` is the current
+    folder, so an empty argument (an unset shell variable) would otherwise read every
+    trace there, some of them twice.
+    """
     out: list[Path] = []
+    errors: list[TraceReadError] = []
     for raw in paths:
+        if not str(raw).strip():
+            errors.append(TraceReadError("''", "empty path"))
+            continue
         p = Path(raw)
         if p.is_dir():
             out.extend(sorted(q for q in p.iterdir() if q.is_file() and _is_trace_file(q)))
         else:
             out.append(p)
-    return out
+    return out, errors
 
 
 def _is_trace_file(p: Path) -> bool:
@@ -156,8 +165,8 @@ def collect_traces(
     from stickslip.data import readers
 
     traces: list[Trace] = []
-    errors: list[TraceReadError] = []
-    for p in expand_paths(paths):
+    files, errors = expand_paths(paths)
+    for p in files:
         try:
             traces.extend(readers.read_file(p, **options))
         except TraceReadError as e:
