@@ -16,9 +16,12 @@
    the bundled window model, --expert none trains without.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
+--recalibrate MODEL skips step 2's training: it re-fits only the spread calibration of
+MODEL (trained by this script with the same arguments) on the same validation lines.
+
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--paper 1600]
        [--paper-seed 5] [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
-       [--work build/line-train] [--out PATH]
+       [--spread-hidden 128] [--work build/line-train] [--out PATH] [--recalibrate MODEL]
 """
 
 from __future__ import annotations
@@ -30,8 +33,12 @@ from pathlib import Path
 import numpy as np
 
 from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
-from stickslip.learning.line_model import save_line_model
-from stickslip.learning.line_training import LineTrainConfig, train_line_ensemble
+from stickslip.learning.line_model import line_metadata, load_line_model, save_line_model
+from stickslip.learning.line_training import (
+    LineTrainConfig,
+    recalibrate_line_ensemble,
+    train_line_ensemble,
+)
 from stickslip.learning.modelfile import TrainedModel, load_model
 from stickslip.learning.workflow import (
     PAPER_TRAIN_SEED,
@@ -71,8 +78,12 @@ def main() -> None:
                     help="beta-NLL weight of the means' gradient")
     ap.add_argument("--beta-var", type=float, default=LineTrainConfig.beta_var,
                     help="beta-NLL weight of the variances' gradient")
+    ap.add_argument("--spread-hidden", type=int, default=LineTrainConfig.spread_hidden,
+                    help="width of a spread head of its own (0: rows of the means' head)")
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
+    ap.add_argument("--recalibrate", type=Path, default=None,
+                    help="re-fit only the spread calibration of this model (no training)")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "line-train")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")
@@ -87,7 +98,18 @@ def main() -> None:
     described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
     data = concat_datasets(sets, columns)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0],
-                          beta=args.beta, beta_var=args.beta_var)
+                          beta=args.beta, beta_var=args.beta_var,
+                          spread_hidden=args.spread_hidden)
+    if args.recalibrate is not None:
+        ens = load_line_model(args.recalibrate)
+        report = recalibrate_line_ensemble(ens, data.force_nN.astype(float), data.x_nm,
+                                           data.params, cfg)  # fmt: skip
+        meta = line_metadata(args.recalibrate)
+        metrics = {**meta["metrics"], **report, "recalibrated_from": str(args.recalibrate)}
+        save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), meta["dataset"], metrics)
+        print(json.dumps(report, indent=1))
+        print(f"wrote {args.out}")
+        return
     expert = {"none": lambda: None, "bundled": lambda: load_model(None),
               "clean": lambda: clean_expert(args.work)}.get(
         args.expert, lambda: load_model(Path(args.expert)))()  # fmt: skip

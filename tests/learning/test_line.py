@@ -11,6 +11,7 @@ from stickslip.learning.line import (
     LineCNN,
     LineEnsemble,
     LineSpec,
+    SpreadClasses,
     expert_inputs,
     gaussian_nll,
     line_inputs,
@@ -21,6 +22,7 @@ from stickslip.learning.line_model import load_line_model, save_line_model
 from stickslip.learning.line_training import (
     LineTrainConfig,
     balanced_scale,
+    class_scale,
     flat_substrate,
     train_line_ensemble,
 )
@@ -163,7 +165,8 @@ def test_training_report_separates_pristine_and_corrupted_validation():
               "velocity_nm_per_s": np.full(n, 60.0),
               "mod_amplitude": np.where(np.arange(n) % 2 == 0, 0.0, 0.2),
               "defect_count": np.zeros(n, int)}  # fmt: skip
-    cfg = LineTrainConfig(members=1, epochs=1, batch_size=32, val_fraction=0.25, mse_epochs=1)
+    cfg = LineTrainConfig(members=1, epochs=1, batch_size=32, val_fraction=0.25, mse_epochs=1,
+                          spread_classes=None)  # one scale row: strata weigh equally
     _, report = train_line_ensemble(force, x, params, cfg, LineSpec(crop=200), progress=False)
     flat_val = report["val_pristine"]["n"]
     assert report["val_corrupted"]["n"] == 30 and 5 <= flat_val <= 25
@@ -247,3 +250,50 @@ def test_training_with_an_expert_fits_the_gate_and_the_own_mean():
     with pytest.raises(ValueError, match="lattice and pixel"):
         train_line_ensemble(force, x, params, cfg, LineSpec(crop=200, pixel_nm=0.03),
                             progress=False, expert=load_model(None))  # fmt: skip
+
+
+def test_spread_classes_read_noise_level_and_resampling():
+    r = simulate(np.array([1.0]), np.array([8.0]), seed=3)
+    clean = r.force_nN[0]
+    classes = SpreadClasses()
+    assert classes.classify(clean[None], [1.0])[0] == 0  # quiet, on the reference lattice
+    assert classes.classify(clean[None], [1.2])[0] == 1  # quiet, resampled
+    rng = np.random.default_rng(0)
+    levels = [classes.classify((clean + rng.normal(0, w, clean.size))[None], [1.0])[0]
+              for w in (0.005, 0.05, 0.15)]  # fmt: skip
+    # faint noise leaves a line quiet; more moves it to the noisy classes, by level
+    # (white noise sigma: median |second difference| = 0.674 sqrt(6) sigma)
+    assert levels == [0, 2, 4]
+
+
+def test_class_scale_gives_each_class_its_coverage():
+    rng = np.random.default_rng(2)
+    cls = np.repeat([0, 1, 2], [400, 2000, 10])
+    # class 0 errors 3x smaller than its predicted spread, class 1 as predicted
+    z = np.abs(rng.normal(size=(cls.size, 2))) * np.where(cls == 0, 1 / 3, 1.0)[:, None]
+    S = class_scale(z, cls, 3, np.zeros(cls.size, int))
+    for c in (0, 1):
+        cov = np.mean(z[cls == c] / S[c] <= Z95, axis=0)
+        assert np.all(np.abs(cov - 0.95) < 0.01)
+    assert np.allclose(S[0], 1 / 3, rtol=0.15) and np.allclose(S[1], 1.0, rtol=0.1)
+    # a class with too few validation lines gets the pooled scale
+    assert np.allclose(S[2], balanced_scale(z, np.zeros(cls.size, int)))
+
+
+def test_spread_head_and_class_calibration_round_trip(tmp_path):
+    torch.manual_seed(1)
+    ens = LineEnsemble(members=[LineCNN(spread_hidden=16) for _ in range(2)], spec=LineSpec(),
+                       y_mean=np.zeros(4), y_std=np.ones(4), classes=SpreadClasses(),
+                       scale=np.linspace(0.2, 1.0, 5)[:, None] * np.ones(4))  # fmt: skip
+    quiet = np.tile(np.linspace(0, 1, 11), 30)  # a clean sawtooth: quiet
+    noisy = quiet + np.random.default_rng(0).normal(0, 0.3, quiet.size)
+    X, C = line_inputs([quiet, noisy], ens.spec), torch.zeros(2, 2)
+    assert list(ens.line_classes(X, C)) == [0, 4]
+    mu, sd = ens.predict_std(X, C)
+    ens.scale = np.ones(4)
+    _, raw = ens.predict_std(X, C)
+    np.testing.assert_allclose(sd / raw, [[0.2] * 4, [1.0] * 4], rtol=1e-5)
+    ens.scale = np.linspace(0.2, 1.0, 5)[:, None] * np.ones(4)
+    back = load_line_model(save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {}))
+    assert back.classes == ens.classes and back.members[0].spread_hidden == 16
+    np.testing.assert_allclose(back.predict_std(X, C)[1], sd, rtol=1e-5)

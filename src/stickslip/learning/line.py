@@ -16,8 +16,9 @@ is exact on a clean line but carries any offset drift; ``ln U0'``, ``ln K'``, ``
 with ``U0 = U0' s`` and ``K = K' / s``) a mean and a log-variance in standardised units:
 trained with the Gaussian negative log-likelihood, each member reports how sure it is.
 An ensemble of members gives the predictive mean and variance (mean of the members'
-variances plus the variance of their means); a per-target scale factor fitted on
-held-out simulations calibrates it.
+variances plus the variance of their means); scale factors fitted on held-out
+simulations calibrate it, one per target and per class of line (:class:`SpreadClasses`:
+quiet lines, as simulations are, need other factors than noisy ones).
 
 Expert input (optional). The paper's window MLP, trained on clean simulations, is very
 precise on a clean line like its training ones and wrong on a corrupted one. A model
@@ -107,10 +108,16 @@ def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
 
 class LineCNN(nn.Module):
     """Strided 1D CNN, global mean+max pooling, conditioning, Gaussian heads; with
-    ``n_expert`` > 0, expert inputs and a gate per target (see the module notes)."""
+    ``n_expert`` > 0, expert inputs and a gate per target (see the module notes).
+
+    ``spread_hidden`` > 0 gives the log-variances a head of their own (one hidden layer
+    of that width) instead of rows of the means' head: the spread then spans its own
+    range of scales (a pristine line's variance is ~1e3 times below a noisy one's)
+    without sharing a hidden layer shaped for the means.
+    """
 
     def __init__(self, channels=(16, 32, 48, 64), n_cond: int = 2, n_targets: int = 4,
-                 hidden: int = 128, n_expert: int = 0):  # fmt: skip
+                 hidden: int = 128, n_expert: int = 0, spread_hidden: int = 0):  # fmt: skip
         super().__init__()
         layers: list[nn.Module] = []
         cin = 2
@@ -120,12 +127,17 @@ class LineCNN(nn.Module):
                        nn.ReLU()]  # fmt: skip
             cin = c
         self.body = nn.Sequential(*layers)
-        n_out = (3 if n_expert else 2) * n_targets
-        self.head = nn.Sequential(
-            nn.Linear(2 * cin + n_cond + n_expert, hidden), nn.ReLU(), nn.Linear(hidden, n_out)
-        )
+        n_in = 2 * cin + n_cond + n_expert
+        # output rows: means, [log-variances], [gates]
+        n_out = (1 + (spread_hidden == 0) + (n_expert > 0)) * n_targets
+        self.head = nn.Sequential(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, n_out))
+        self.spread = None
+        if spread_hidden:
+            self.spread = nn.Sequential(nn.Linear(n_in, spread_hidden), nn.ReLU(),
+                                        nn.Linear(spread_hidden, n_targets))  # fmt: skip
         self.n_targets = n_targets
         self.n_expert = n_expert
+        self.spread_hidden = spread_hidden
 
     def fused(self) -> LineCNN:
         """An inference copy with each batch norm folded into its convolution."""
@@ -164,14 +176,19 @@ class LineCNN(nn.Module):
             if expert is None:
                 raise ValueError("this network reads expert inputs: pass expert=")
             parts.append(expert)
-        out = self.head(torch.cat(parts, dim=1))
+        features = torch.cat(parts, dim=1)
+        out = self.head(features)
         t = self.n_targets
-        own, log_var = out[:, :t], out[:, t : 2 * t]
+        own = out[:, :t]
+        if self.spread is None:
+            log_var, gate_rows = out[:, t : 2 * t], out[:, 2 * t :]
+        else:
+            log_var, gate_rows = self.spread(features), out[:, t:]
         mean = own
         if self.n_expert:
             # the expert estimates the last targets (U0', K', eta), not the friction
             e = torch.cat([own[:, : t - 3], expert[:, :3]], dim=1)
-            mean = own + torch.sigmoid(out[:, 2 * t :]) * (e - own)
+            mean = own + torch.sigmoid(gate_rows) * (e - own)
         return mean, log_var.clamp(-12.0, 6.0), own
 
 
@@ -223,7 +240,11 @@ def gaussian_nll(
 
 @dataclass
 class LineEnsemble:
-    """Members, target normalisation and the calibration of their predictive spread."""
+    """Members, target normalisation and the calibration of their predictive spread.
+
+    ``scale`` multiplies the predictive std: one row per target (n_targets,), or, with
+    ``classes``, one row per class of line (n_classes, n_targets).
+    """
 
     members: list[LineCNN]
     spec: LineSpec
@@ -231,6 +252,14 @@ class LineEnsemble:
     y_std: np.ndarray
     scale: np.ndarray = field(default_factory=lambda: np.ones(len(TARGETS)))
     expert: TrainedModel | None = None
+    classes: SpreadClasses | None = None
+
+    def line_classes(self, X: torch.Tensor, C: torch.Tensor) -> np.ndarray:
+        """Spread class of each input line (:class:`SpreadClasses`; all 0 without)."""
+        if self.classes is None:
+            return np.zeros(X.shape[0], int)
+        force = X[:, 0].numpy().astype(float) * self.spec.force_scale_nN
+        return self.classes.classify(force, C[:, 0].numpy().astype(float) + 1.0)
 
     def expert_for(self, X: torch.Tensor) -> torch.Tensor | None:
         """The members' expert inputs for ``X`` (None for a model without an expert)."""
@@ -254,12 +283,71 @@ class LineEnsemble:
                 means[k, sl] = mu.numpy()
                 variances[k, sl] = lv.exp().numpy()
         var = np.mean(variances, axis=0) + means.var(axis=0)
-        return means.mean(axis=0), np.sqrt(var) * self.scale
+        scale = np.asarray(self.scale)
+        if scale.ndim == 2:
+            scale = scale[self.line_classes(X, C)]
+        return means.mean(axis=0), np.sqrt(var) * scale
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
         mu, sd = self.predict_std(X, C)
         return mu * self.y_std + self.y_mean, sd * self.y_std
+
+
+@dataclass(frozen=True)
+class SpreadClasses:
+    """Classes of lines whose predictive spread is calibrated separately.
+
+    The networks' spread is right on average but not in every kind of line: on a quiet
+    line (no detector noise, as in a simulation) it is several times too wide, and
+    how much depends on whether the line was resampled onto the reference lattice.
+    Both can be read off the line itself, so each class gets its own scale factors:
+
+    - 0: quiet, recorded on the reference lattice (not resampled);
+    - 1: quiet, resampled from another lattice;
+    - 2, 3, ...: noisy, by noise level, between ``noise_edges``.
+
+    The noise level is ln of the median absolute second difference of the mapped line
+    (nN): a slip moves few pixels, so in a quiet line it stays tiny, while white
+    detector noise raises it directly. A line is quiet below ``quiet_below``.
+    """
+
+    quiet_below: float = -3.0
+    noise_edges: tuple[float, ...] = (-2.2, -1.7)
+
+    @property
+    def n(self) -> int:
+        """Number of classes."""
+        return 3 + len(self.noise_edges)
+
+    def classify(self, force_nN: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
+        """Class of each of B mapped lines of equal length.
+
+        Parameters
+        ----------
+        force_nN : ndarray (B, L)
+            Mapped lines (on the reference lattice and pixel).
+        lattice_ratio : ndarray (B,)
+            ``a / a0`` of each line (1: recorded on the reference lattice).
+        """
+        level = noise_level(force_nN)
+        on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
+        noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
+        return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy)
+
+    def classify_lines(self, lines: list[np.ndarray], lattice_ratio: np.ndarray) -> np.ndarray:
+        """:meth:`classify` for mapped lines of any lengths."""
+        return np.array([self.classify(f[None], [r])[0]
+                         for f, r in zip(lines, lattice_ratio, strict=True)], int)  # fmt: skip
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def noise_level(force_nN: np.ndarray) -> np.ndarray:
+    """ln of the median absolute second difference (nN) of each row of ``force_nN``."""
+    d2 = np.abs(np.diff(np.asarray(force_nN, float), n=2, axis=-1))
+    return np.log(np.median(d2, axis=-1) + 1e-4)
 
 
 @dataclass

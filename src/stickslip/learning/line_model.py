@@ -8,11 +8,14 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
     channels            CNN channels
     members             list of state_dicts, one per ensemble member
     y_mean, y_std       target normalisation (training set)
-    scale               calibration of the predictive spread, per target
+    scale               calibration of the predictive spread: per target, or per class
+                        of line and target
+    spread_classes      SpreadClasses as a dict (absent: one scale row for all lines)
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data
     metrics             validation metrics recorded at training time
     n_expert            expert inputs of each member (0, or absent: none)
+    spread_hidden       width of the members' own spread head (0, or absent: none)
     expert              the window-model payload the members read (absent: none)
 """
 
@@ -27,7 +30,7 @@ import torch
 
 from stickslip import __version__
 from stickslip.data.atomic import atomic_path
-from stickslip.learning.line import TARGETS, LineCNN, LineEnsemble, LineSpec
+from stickslip.learning.line import TARGETS, LineCNN, LineEnsemble, LineSpec, SpreadClasses
 from stickslip.learning.modelfile import ModelFileError, _major, _plain, from_payload
 
 FORMAT = "stickslip-line-model-1"
@@ -51,6 +54,9 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
         "dataset": _plain(dataset),
         "metrics": _plain(metrics),
     }
+    payload["spread_hidden"] = ens.members[0].spread_hidden
+    if ens.classes is not None:
+        payload["spread_classes"] = _plain(ens.classes.to_dict())
     if ens.expert is not None:
         payload["n_expert"] = ens.members[0].n_expert
         payload["expert"] = ens.expert.to_payload()
@@ -70,13 +76,19 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
         )
     try:
         spec = LineSpec(**payload["spec"])
+        classes = None
+        if "spread_classes" in payload:
+            c = payload["spread_classes"]
+            classes = SpreadClasses(float(c["quiet_below"]),
+                                    tuple(float(e) for e in c["noise_edges"]))  # fmt: skip
         expert = None
         if "expert" in payload:
             expert = from_payload(payload["expert"], f"{name} (expert)")
         members = []
         for sd in payload["members"]:
             net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS),
-                          n_expert=int(payload.get("n_expert", 0)))  # fmt: skip
+                          n_expert=int(payload.get("n_expert", 0)),
+                          spread_hidden=int(payload.get("spread_hidden", 0)))  # fmt: skip
             net.load_state_dict(sd)
             net.eval()
             members.append(net)
@@ -87,6 +99,7 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             y_std=payload["y_std"].numpy(),
             scale=payload["scale"].numpy(),
             expert=expert,
+            classes=classes,
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__

@@ -15,8 +15,14 @@ would treat a pristine-looking line as a corrupted one that happens to look clea
 with the corrupted lines' spread. A ``pristine_fraction`` of every batch is therefore
 drawn from the flat-substrate trajectories and left without detector effects: a spike
 in the prior at "no corruption". The calibration then weighs pristine and corrupted
-validation lines equally (one scale per target, so that the 95 % interval covers 95 %
-of the pooled truths) and reports the coverage of each.
+validation lines equally and reports the coverage of each.
+
+Classes of lines. One scale per target cannot fit every line: the spread is several
+times too wide on quiet lines (no detector noise) and about right on noisy ones, and
+the ratio moves with the noise level. The calibration therefore fits a scale per
+target and per class of line (:class:`~stickslip.learning.line.SpreadClasses`, read off
+the line itself: quiet on the reference lattice, quiet and resampled, noisy by noise
+level), so that the 95 % interval covers 95 % of the validation truths in each class.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from stickslip.learning.line import (
     LineCNN,
     LineEnsemble,
     LineSpec,
+    SpreadClasses,
     conditioning,
     gaussian_nll,
     line_inputs,
@@ -77,6 +84,9 @@ class LineTrainConfig:
     val_fraction: float = 0.1
     seed: int = 0
     channels: tuple[int, ...] = (16, 32, 48, 64)
+    spread_hidden: int = 128  # > 0: the log-variances get a head of their own (LineCNN)
+    # classes of lines calibrated separately (None: one scale per target for all lines)
+    spread_classes: SpreadClasses | None = field(default_factory=SpreadClasses)
     effects: InstrumentEffects = field(default_factory=lambda: TRAIN_EFFECTS)
 
     def to_dict(self) -> dict:
@@ -198,22 +208,43 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     )
 
 
-def calibrate(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray):
+def class_scale(z_abs: np.ndarray, classes: np.ndarray, n_classes: int, strata: np.ndarray,
+                min_lines: int = 30) -> np.ndarray:  # fmt: skip
+    """Scales (n_classes, n_targets): 95 % of each class's lines inside the interval (its
+    lines weighing equally: the class, not the stratum, now says what kind of line it
+    is); a class with fewer than ``min_lines`` validation lines gets the pooled scale,
+    strata weighing equally (:func:`balanced_scale`)."""
+    out = np.tile(balanced_scale(z_abs, strata), (n_classes, 1))
+    for c in range(n_classes):
+        m = classes == c
+        if m.sum() >= min_lines:
+            out[c] = balanced_scale(z_abs[m], np.zeros(int(m.sum()), int))
+    return out
+
+
+def calibrate(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray,
+              classes: SpreadClasses | None = None):  # fmt: skip
     """Fit ``ens.scale`` on a validation set (targets ``Y_val`` in :func:`line_targets`
-    units; strata weighing equally, :func:`balanced_scale`); returns the standardised
-    predictive means and the calibrated ``|z|`` of every validation line."""
-    ens.scale = np.ones(len(TARGETS))
+    units; strata weighing equally, :func:`balanced_scale`), per class of line when
+    ``classes`` is given (:func:`class_scale`); returns the standardised predictive
+    means, the calibrated ``|z|`` and the class of every validation line."""
+    ens.scale, ens.classes = np.ones(len(TARGETS)), classes
     mu, sd = predict_std_lines(ens, vs.lines, vs.C)
     Yv = _standardise_friction(Y_val, vs.observed_mean, ens.y_mean, ens.y_std).numpy()
     z = np.abs(mu - Yv) / sd
-    ens.scale = balanced_scale(z, vs.strata)
-    return mu, z / ens.scale
+    if classes is None:
+        ens.scale = balanced_scale(z, vs.strata)
+        return mu, z / ens.scale, np.zeros(len(vs.lines), int)
+    cls = classes.classify_lines(vs.lines, vs.C[:, 0].numpy().astype(float) + 1.0)
+    ens.scale = class_scale(z, cls, classes.n, vs.strata)
+    return mu, z / ens.scale[cls], cls
 
 
-def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray) -> dict:
+def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray,
+                         classes: SpreadClasses | None = None) -> dict:  # fmt: skip
     """Calibrate ``ens`` on a validation set (:func:`calibrate`) and report its errors and
-    interval coverage there, overall and per stratum (corrupted, pristine)."""
-    mu, z_cal = calibrate(ens, vs, Y_val)
+    interval coverage there, overall, per stratum (corrupted, pristine) and per class."""
+    mu, z_cal, cls = calibrate(ens, vs, Y_val, classes)
     pred = mu * ens.y_std + ens.y_mean
     pred[:, 0] += vs.observed_mean
     rel = np.exp(pred[:, 1:] - Y_val[:, 1:]) - 1.0
@@ -227,8 +258,17 @@ def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray
         "val_rel_rmse": named(np.sqrt(np.mean(rel**2, axis=0))),
         "val_coverage95": named(np.mean(z_cal <= Z95, axis=0)),
         "val_coverage68": named(np.mean(z_cal <= Z68, axis=0)),
-        "calibration_scale": named(ens.scale),
     }
+    if classes is None:
+        report["calibration_scale"] = named(ens.scale)
+    else:
+        report["spread_classes"] = classes.to_dict()
+        report["calibration_scale"] = [named(row) for row in ens.scale]
+        report["val_per_class"] = [
+            {"class": c, "n": int(np.sum(cls == c)),
+             "coverage95": named(np.mean(z_cal[cls == c] <= Z95, axis=0))}
+            for c in range(classes.n) if np.any(cls == c)
+        ]  # fmt: skip
     for g, name in ((0, "corrupted"), (1, "pristine")):
         m = vs.strata == g
         report[f"val_{name}"] = {
@@ -238,6 +278,19 @@ def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray
             "coverage68": named(np.mean(z_cal[m] <= Z68, axis=0)),
         }
     return report
+
+
+def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.ndarray,
+                              params: dict[str, np.ndarray],
+                              config: LineTrainConfig) -> dict:  # fmt: skip
+    """Re-fit the spread calibration of an ensemble that :func:`train_line_ensemble` trained
+    on these traces with this ``config``, on the same validation lines (the members are
+    left as they are); returns the report of :func:`calibrate_and_report`."""
+    val, _ = split(force_nN.shape[0], config, np.random.default_rng(config.seed))
+    vs = validation_set(force_nN, x_nm, params, val, config, ens.spec)
+    Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
+                     params["lattice_nm"], ens.spec)  # fmt: skip
+    return calibrate_and_report(ens, vs, Y[vs.rows], config.spread_classes)
 
 
 def train_line_ensemble(
@@ -286,7 +339,8 @@ def train_line_ensemble(
     steps_per_epoch = max(1, train.size // config.batch_size)
     t0 = time.perf_counter()
     for k in range(config.members):
-        net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0)
+        net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0,
+                      spread_hidden=config.spread_hidden)  # fmt: skip
         opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         sched = torch.optim.lr_scheduler.OneCycleLR(
             opt, max_lr=config.lr, total_steps=config.epochs * steps_per_epoch
@@ -331,7 +385,7 @@ def train_line_ensemble(
             bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
         ens.members.append(net)
     report = {
-        **calibrate_and_report(ens, vs, Y[vs.rows]),
+        **calibrate_and_report(ens, vs, Y[vs.rows], config.spread_classes),
         "history": history,
         "train_seconds": time.perf_counter() - t0,
         "n_train": int(train.size),
