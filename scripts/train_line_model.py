@@ -101,10 +101,17 @@ def main() -> None:
                           beta=args.beta, beta_var=args.beta_var,
                           spread_hidden=args.spread_hidden)
     if args.recalibrate is not None:
+        meta = line_metadata(args.recalibrate)
+        # the validation split is only held out if the data and the training settings are
+        # the ones the model was trained with (the calibration classes may differ)
+        trained = {k: v for k, v in meta["train_config"].items() if k != "spread_classes"}
+        asked = {k: v for k, v in cfg.to_dict().items() if k != "spread_classes"}
+        if meta["dataset"].get("sets") != described or json.dumps(
+            trained, sort_keys=True) != json.dumps(asked, sort_keys=True):  # fmt: skip
+            ap.error(f"{args.recalibrate} was not trained with these data and settings")
         ens = load_line_model(args.recalibrate)
         report = recalibrate_line_ensemble(ens, data.force_nN.astype(float), data.x_nm,
                                            data.params, cfg)  # fmt: skip
-        meta = line_metadata(args.recalibrate)
         metrics = {**meta["metrics"], **report, "recalibrated_from": str(args.recalibrate)}
         save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), meta["dataset"], metrics)
         print(json.dumps(report, indent=1))
