@@ -99,6 +99,11 @@ def line_inputs(lines: list[np.ndarray], spec: LineSpec, length: int | None = No
     return torch.from_numpy(X)
 
 
+def input_force_nN(X: torch.Tensor, spec: LineSpec) -> np.ndarray:
+    """The force channel of stacked inputs (:func:`line_inputs`) back in nN, (B, L)."""
+    return X[:, 0].numpy().astype(np.float64) * spec.force_scale_nN
+
+
 def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
     """Conditioning scalars (B, 2): lattice ratio - 1 and ln of the velocity ratio."""
     s = np.asarray(lattice_nm, float) / spec.lattice_nm - 1.0
@@ -203,8 +208,7 @@ def expert_inputs(expert: TrainedModel, X: torch.Tensor, spec: LineSpec,
     expert's training range stays bounded), then ln of the windows' standard deviation
     of ln U0' and ln K'.
     """
-    F = X[:, 0].numpy().astype(np.float64) * spec.force_scale_nN
-    est = predict_windows(expert, F)  # (B, W, targets), physical
+    est = predict_windows(expert, input_force_nN(X, spec))  # (B, W, targets), physical
     U0 = np.clip(est[..., expert.targets.index("U0_eV")], 1e-3, None)
     K = np.clip(est[..., expert.targets.index("K_N_m")], 1e-2, None)
     lu, lk = np.log(U0.mean(axis=1)), np.log(K.mean(axis=1))
@@ -258,8 +262,8 @@ class LineEnsemble:
         """Spread class of each input line (:class:`SpreadClasses`; all 0 without)."""
         if self.classes is None:
             return np.zeros(X.shape[0], int)
-        force = X[:, 0].numpy().astype(float) * self.spec.force_scale_nN
-        return self.classes.classify(force, C[:, 0].numpy().astype(float) + 1.0)
+        ratio = C[:, 0].numpy().astype(float) + 1.0
+        return self.classes.classify(input_force_nN(X, self.spec), ratio)
 
     def expert_for(self, X: torch.Tensor) -> torch.Tensor | None:
         """The members' expert inputs for ``X`` (None for a model without an expert)."""

@@ -208,6 +208,18 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     )
 
 
+def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
+             rng: np.random.Generator) -> tuple[np.ndarray, ValidationSet, np.ndarray]:  # fmt: skip
+    """Training indices, validation lines and the target matrix (:func:`line_targets`) of
+    a run with ``config``; ``rng`` is the run's, its first draw the split (:func:`split`),
+    so training and re-calibration see the same validation lines."""
+    val, train = split(force_nN.shape[0], config, rng)
+    vs = validation_set(force_nN, x_nm, params, val, config, spec)
+    Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
+                     params["lattice_nm"], spec)  # fmt: skip
+    return train, vs, Y
+
+
 def class_scale(z_abs: np.ndarray, classes: np.ndarray, n_classes: int, strata: np.ndarray,
                 min_lines: int = 30) -> np.ndarray:  # fmt: skip
     """Scales (n_classes, n_targets): 95 % of each class's lines inside the interval (its
@@ -286,10 +298,8 @@ def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.
     """Re-fit the spread calibration of an ensemble that :func:`train_line_ensemble` trained
     on these traces with this ``config``, on the same validation lines (the members are
     left as they are); returns the report of :func:`calibrate_and_report`."""
-    val, _ = split(force_nN.shape[0], config, np.random.default_rng(config.seed))
-    vs = validation_set(force_nN, x_nm, params, val, config, ens.spec)
-    Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
-                     params["lattice_nm"], ens.spec)  # fmt: skip
+    _, vs, Y = held_out(force_nN, x_nm, params, config, ens.spec,
+                        np.random.default_rng(config.seed))  # fmt: skip
     return calibrate_and_report(ens, vs, Y[vs.rows], config.spread_classes)
 
 
@@ -324,14 +334,12 @@ def train_line_ensemble(
         raise ValueError("the expert must read lines on the line model's lattice and pixel")
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    val, train = split(force_nN.shape[0], config, rng)
+    train, vs, Y = held_out(force_nN, x_nm, params, config, spec, rng)
     a, v = params["lattice_nm"], params["velocity_nm_per_s"]
-    Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"], a, spec)
     flat_train = train[flat_substrate(params)[train]]
     # friction: the network predicts the correction to the observed mean (~ the offset)
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
-    vs = validation_set(force_nN, x_nm, params, val, config, spec)
     ens = LineEnsemble(members=[], spec=spec, y_mean=y_mean, y_std=y_std, expert=expert)
     Xv, Cv, Ev = vs.X, vs.C, ens.expert_for(vs.X)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)

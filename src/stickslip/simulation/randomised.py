@@ -21,7 +21,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from stickslip import __version__
-from stickslip.data.dataset import Dataset, create_dataset_file, load_dataset, write_rows
+from stickslip.data.dataset import (
+    Dataset,
+    create_dataset_file,
+    load_dataset,
+    read_attrs,
+    write_rows,
+)
 from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
 from stickslip.simulation.sampling import SubstrateDraw, sample_parameters, sample_substrate
 from stickslip.simulation.simulate import simulate
@@ -142,6 +148,8 @@ def cached_randomised_set(config: RandomisedConfig, work: str | os.PathLike,
     """The set ``work/randomised_{n}_{seed}.h5``, simulated first if it is missing or was
     made with other settings than ``config``."""
     path = Path(work) / f"randomised_{config.n}_{config.seed}.h5"
-    if not path.exists() or RandomisedConfig.from_json(load_dataset(path).config_json) != config:
+    # the stored config is in the file's attributes: no need to read its traces twice
+    if not path.exists() or RandomisedConfig.from_json(
+            str(read_attrs(path).get("config", "{}"))) != config:  # fmt: skip
         make_randomised_set(config, path, progress)  # replaces the file only when done
     return load_dataset(path)
