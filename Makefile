@@ -36,6 +36,7 @@ bench-learn: $(STAMP)
 	$(BIN)/python benchmarks/noise_robustness.py
 	$(BIN)/python benchmarks/inference_speed.py --threads 1
 	$(BIN)/python benchmarks/lab_bench.py
+	$(BIN)/python benchmarks/coverage_check.py
 	$(BIN)/python benchmarks/encoder_vs_mlp.py
 
 model: $(STAMP)

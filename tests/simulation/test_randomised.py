@@ -4,7 +4,14 @@ import json
 
 import numpy as np
 
-from stickslip.simulation.randomised import A_REF_NM, RandomisedConfig, draw_randomised
+from stickslip.evaluation.bench import BenchConfig
+from stickslip.simulation.config import LAB_SUBSTRATE
+from stickslip.simulation.randomised import (
+    A_REF_NM,
+    RandomisedConfig,
+    draw_randomised,
+    lab_config,
+)
 from stickslip.units import eta_from
 
 
@@ -49,3 +56,17 @@ def test_config_read_back_from_json_including_older_files():
     del old["reference_fraction"]  # a file written before the field existed
     back = RandomisedConfig.from_json(json.dumps(old))
     assert back.reference_fraction == 0.0 and back.ranges == cfg.ranges
+
+
+def test_lab_config_draws_every_line_on_the_laboratory_substrate():
+    cfg = lab_config(400, 9)
+    assert cfg.substrate == LAB_SUBSTRATE == BenchConfig().substrate
+    table, sub = draw_randomised(cfg)
+    lo, hi = LAB_SUBSTRATE.modulation_amplitude
+    assert np.all((table["mod_amplitude"] > lo) & (table["mod_amplitude"] <= hi))
+    assert table["defect_count"].max() == LAB_SUBSTRATE.defects_per_line[1]
+    assert np.all(np.abs(sub.defect_height) <= LAB_SUBSTRATE.defect_height[1])
+    # the training sets' parameters, lattices and velocities
+    broad, _ = draw_randomised(RandomisedConfig(n=400, seed=9))
+    for k in ("U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s"):
+        np.testing.assert_array_equal(table[k], broad[k])

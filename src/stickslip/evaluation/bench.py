@@ -24,7 +24,12 @@ from tqdm.auto import tqdm
 
 from stickslip import __version__
 from stickslip.data.dataset import create_dataset_file, write_rows
-from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
+from stickslip.simulation.config import (
+    LAB_SUBSTRATE,
+    ParameterRange,
+    PhysicalSettings,
+    SubstrateAugmentation,
+)
 from stickslip.simulation.instrument import LAB, InstrumentEffects, apply_instrument
 from stickslip.simulation.sampling import sample_parameters, sample_substrate
 from stickslip.simulation.simulate import simulate
@@ -43,15 +48,7 @@ class BenchConfig:
     velocity_nm_per_s: float = 30.0
     temperature_K: float = 296.0
     ranges: ParameterRange = field(default_factory=lambda: ParameterRange(eta=(1.5, 40.0)))
-    substrate: SubstrateAugmentation = field(
-        default_factory=lambda: SubstrateAugmentation(
-            modulation_amplitude=(0.0, 0.3),
-            modulation_wavelength_nm=(4.0, 30.0),
-            defects_per_line=(0, 3),
-            defect_height=(-0.3, 0.3),
-            defect_width_nm=(0.1, 0.5),
-        )
-    )
+    substrate: SubstrateAugmentation = LAB_SUBSTRATE
     instrument: InstrumentEffects = LAB
 
     def to_json(self) -> str:

@@ -146,6 +146,17 @@ class SubstrateAugmentation:
         return self.modulation_amplitude[1] > 0 or self.defects_per_line[1] > 0
 
 
+#: The substrate of a typical laboratory sample: every line's barrier modulated, up to
+#: three defects (the test bench's; see also ``randomised.lab_config``).
+LAB_SUBSTRATE = SubstrateAugmentation(
+    modulation_amplitude=(0.0, 0.3),
+    modulation_wavelength_nm=(4.0, 30.0),
+    defects_per_line=(0, 3),
+    defect_height=(-0.3, 0.3),
+    defect_width_nm=(0.1, 0.5),
+)
+
+
 @dataclass(frozen=True)
 class SweepConfig:
     """Everything needed to regenerate a dataset from its file alone."""

@@ -28,7 +28,12 @@ from stickslip.data.dataset import (
     read_attrs,
     write_rows,
 )
-from stickslip.simulation.config import ParameterRange, PhysicalSettings, SubstrateAugmentation
+from stickslip.simulation.config import (
+    LAB_SUBSTRATE,
+    ParameterRange,
+    PhysicalSettings,
+    SubstrateAugmentation,
+)
 from stickslip.simulation.sampling import SubstrateDraw, sample_parameters, sample_substrate
 from stickslip.simulation.simulate import simulate
 from stickslip.units import eta_from
@@ -82,6 +87,16 @@ class RandomisedConfig:
         d["ranges"] = ParameterRange(**tuples(d["ranges"]))
         d["substrate"] = SubstrateAugmentation(**tuples(d["substrate"]))
         return cls(**tuples(d))
+
+
+def lab_config(n: int, seed: int) -> RandomisedConfig:
+    """A randomised set on a typical laboratory's substrate rather than a broad one: the
+    training sets' parameters, lattices and velocities on
+    :data:`~stickslip.simulation.config.LAB_SUBSTRATE` (every line augmented). With the
+    :data:`~stickslip.simulation.instrument.LAB` detector effects added, it lies between
+    the training distribution and the test bench (which also fixes the materials'
+    lattices and the scan velocity)."""
+    return RandomisedConfig(n=n, seed=seed, substrate=LAB_SUBSTRATE, clean_fraction=0.0)
 
 
 def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], SubstrateDraw]:
