@@ -77,12 +77,13 @@ def scored(ds: Dataset, model) -> dict:
     for k in ("U0_eV", "K_N_m"):
         out[f"{k}_rel_rmse"] = float(np.sqrt(np.mean((lp.values[k] / p[k] - 1)[ok] ** 2)))
     v = p["velocity_nm_per_s"]
-    out["coverage95_by_velocity"] = {
-        f"{u:g}": {"n": int(np.sum(ok & (v == u))),
-                   **{k: coverage(p[k][ok & (v == u)], lp.lo95[k][ok & (v == u)],
-                                  lp.hi95[k][ok & (v == u)]) for k in ("U0_eV", "K_N_m")}}
-        for u in np.unique(v)
-    }  # fmt: skip
+    out["coverage95_by_velocity"] = {}
+    for u in np.unique(v):
+        m = ok & (v == u)
+        out["coverage95_by_velocity"][f"{u:g}"] = {
+            "n": int(m.sum()),
+            **{k: coverage(p[k][m], lp.lo95[k][m], lp.hi95[k][m]) for k in ("U0_eV", "K_N_m")},
+        }
     return out
 
 

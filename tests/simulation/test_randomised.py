@@ -9,6 +9,7 @@ from stickslip.simulation.config import LAB_SUBSTRATE
 from stickslip.simulation.randomised import (
     A_REF_NM,
     RandomisedConfig,
+    cache_path,
     draw_randomised,
     lab_config,
 )
@@ -70,3 +71,13 @@ def test_lab_config_draws_every_line_on_the_laboratory_substrate():
     broad, _ = draw_randomised(RandomisedConfig(n=400, seed=9))
     for k in ("U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s"):
         np.testing.assert_array_equal(table[k], broad[k])
+
+
+def test_cache_path_keeps_sets_of_other_settings_apart():
+    plain = cache_path(RandomisedConfig(n=400, seed=9), "w")
+    assert plain.name == "randomised_400_9.h5"  # the training sets' names stay as they were
+    others = {cache_path(c, "w") for c in (lab_config(400, 9),
+                                           RandomisedConfig(n=400, seed=9, reference_fraction=0.0))}
+    assert plain not in others and len(others) == 2
+    assert all(p.name.startswith("randomised_400_9_") for p in others)
+    assert cache_path(lab_config(400, 9), "w") == cache_path(lab_config(400, 9), "w")

@@ -12,6 +12,7 @@ Detector effects are not simulated here: the training pipeline adds them on the 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -158,11 +159,22 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     return out
 
 
+def cache_path(config: RandomisedConfig, work: str | os.PathLike) -> Path:
+    """Where :func:`cached_randomised_set` keeps a set: ``work/randomised_{n}_{seed}.h5``
+    for the default settings, with a digest of the config appended for any other, so
+    that sets of the same size and seed but other settings (an ablation's, the
+    laboratory prior's) do not replace each other in a shared folder."""
+    name = f"randomised_{config.n}_{config.seed}"
+    if config != RandomisedConfig(n=config.n, seed=config.seed):
+        name += "_" + hashlib.sha256(config.to_json().encode()).hexdigest()[:10]
+    return Path(work) / f"{name}.h5"
+
+
 def cached_randomised_set(config: RandomisedConfig, work: str | os.PathLike,
                           progress: bool = True) -> Dataset:  # fmt: skip
-    """The set ``work/randomised_{n}_{seed}.h5``, simulated first if it is missing or was
-    made with other settings than ``config``."""
-    path = Path(work) / f"randomised_{config.n}_{config.seed}.h5"
+    """The set at :func:`cache_path`, simulated first if it is missing or was made with
+    other settings than ``config``."""
+    path = cache_path(config, work)
     # the stored config is in the file's attributes: no need to read its traces twice
     if not path.exists() or RandomisedConfig.from_json(
             str(read_attrs(path).get("config", "{}"))) != config:  # fmt: skip
