@@ -6,7 +6,8 @@ the training distribution to the bench:
 
 1. randomised held-out: --n-randomised new trajectories of the training distribution
    (seed 301), one fixed draw of the training detector effects (20 % left clean, as in
-   training and lab_bench.py);
+   training and lab_bench.py); then the same trajectories with effects from the broad
+   ranges alone (line_training.TRAIN_EFFECTS: the training prior's tail);
 2. laboratory prior: the training parameters, lattices and velocities on the bench's
    substrate (randomised.lab_config, seed 401), with the bench's LAB detector effects;
 3. benches: the lab bench (evaluation.bench) with its own seed and two others.
@@ -35,6 +36,7 @@ from stickslip.evaluation.bench import BENCH_SEED, BenchConfig, make_bench
 from stickslip.evaluation.calibration import coverage
 from stickslip.learning.line import predict_raw_lines
 from stickslip.learning.line_model import load_line_model
+from stickslip.learning.line_training import TRAIN_EFFECTS
 from stickslip.simulation.instrument import LAB, apply_instrument
 from stickslip.simulation.randomised import cached_randomised_set, lab_config
 
@@ -100,6 +102,9 @@ def main() -> None:
     populations = {
         f"randomised held-out (seed {RANDOMISED_SEED})":
             lambda: randomised_heldout(args.work, args.n_randomised, seed=RANDOMISED_SEED),
+        "the same, broad effects only":
+            lambda: randomised_heldout(args.work, args.n_randomised, seed=RANDOMISED_SEED,
+                                       effects=TRAIN_EFFECTS),
         f"laboratory prior (seed {LAB_SEED})": lambda: lab_prior(args.work, args.n_lab),
         **{f"bench (seed {s})": (lambda s=s: bench(args.work, s, args.n_per_material))
            for s in BENCH_SEEDS},

@@ -38,14 +38,14 @@ from stickslip.evaluation.bench import MATERIALS, BenchConfig, make_bench
 from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.line import Z95, predict_raw_lines
-from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig
+from stickslip.learning.line_training import LineTrainConfig
 from stickslip.learning.workflow import (
     CLEAN_TEST_SEED,
     LAB_MLP_SEED,
     clean_window_model,
     sweep_if_missing,
 )
-from stickslip.simulation.instrument import apply_instrument
+from stickslip.simulation.instrument import EffectsMixture, InstrumentEffects, apply_instrument
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,16 +58,19 @@ def window_model(work: Path, recipe: str, epochs: int):
                               recipe, epochs, progress=False)  # fmt: skip
 
 
-def randomised_heldout(work: Path, n: int, seed: int = 201) -> Dataset:
+def randomised_heldout(
+    work: Path, n: int, seed: int = 201, effects: InstrumentEffects | EffectsMixture | None = None
+) -> Dataset:
     """Held-out lines from the line model's own training distribution (cached).
 
     A randomised set (other seed than any training set) with the training detector
-    effects, one fixed draw, the same fraction left clean. Truth of <F>: the clean mean.
+    effects (or ``effects``: ``TRAIN_EFFECTS`` for the broad ranges alone), one fixed
+    draw, the same fraction left clean. Truth of <F>: the clean mean.
     """
     ds = cached_randomised_set(RandomisedConfig(n=n, seed=seed), work)
     rng = np.random.default_rng([seed, 77])
     clean = ds.force_nN.astype(float)
-    F, _ = apply_instrument(clean, TRAIN_EFFECTS, rng)
+    F, _ = apply_instrument(clean, effects or LineTrainConfig().effects, rng)
     keep = rng.random(ds.n) < LineTrainConfig.clean_fraction
     F[keep] = clean[keep]
     return Dataset(F, ds.x_nm, ds.params, {**ds.attrs, "kind": "randomised-heldout"})

@@ -3,24 +3,29 @@
 1. Simulates domain-randomised training sets, one per seed (stickslip.simulation.randomised:
    lattices 0.235-0.335 nm with 30 % exactly on graphite's, 30-90 nm/s, modulated and
    defective substrates), cached under --work (a cached file is reused only if its
-   stored config is the one asked for), plus --paper clean paper-preset trajectories
-   (graphite lattice, 60 nm/s, flat substrate: the expert's own conditions, so the
-   members learn how far to trust it there and how small their spread can be; seed
-   --paper-seed, apart from the expert's and the benchmarks' seeds).
-2. Trains the ensemble with on-the-fly detector effects (line_training.TRAIN_EFFECTS)
-   and calibrates its spread on a held-out split. The members read an expert input and
-   learn when to trust it (stickslip.learning.line): by default the paper's pi MLP
-   trained on clean paper-preset simulations (the bundled window model's data and
-   recipe, without its noise augmentation: the most precise expert on a clean line,
-   and plainly wrong on a noisy one), trained here and cached; --expert bundled reads
-   the bundled window model, --expert none trains without.
+   stored config is the one asked for); --typical trajectories on a typical careful
+   measurement's substrate (randomised.lab_config: the same parameters, lattices and
+   velocities, milder modulation and defects; seed --typical-seed); and --paper clean
+   paper-preset trajectories (graphite lattice, 60 nm/s, flat substrate: the expert's
+   own conditions, so the members learn how far to trust it there and how small their
+   spread can be; seed --paper-seed, apart from the expert's and the benchmarks' seeds).
+2. Trains the ensemble with on-the-fly detector effects and calibrates its spread on a
+   held-out split. The effects' prior (line_training.training_effects) gives a
+   --typical-fraction of lines a typical careful measurement's effects (instrument.LAB)
+   and the rest the broad ranges (line_training.TRAIN_EFFECTS). The members read an
+   expert input and learn when to trust it (stickslip.learning.line): by default the
+   paper's pi MLP trained on clean paper-preset simulations (the bundled window model's
+   data and recipe, without its noise augmentation: the most precise expert on a clean
+   line, and plainly wrong on a noisy one), trained here and cached; --expert bundled
+   reads the bundled window model, --expert none trains without.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
 --recalibrate MODEL skips step 2's training: it re-fits only the spread calibration of
 MODEL (trained by this script with the same arguments) on the same validation lines.
 
-Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--paper 1600]
-       [--paper-seed 5] [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
+Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--typical 3000]
+       [--typical-seed 104] [--typical-fraction 0.8] [--paper 3200] [--paper-seed 5]
+       [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
        [--spread-hidden 128] [--work build/line-train] [--out PATH] [--recalibrate MODEL]
 """
 
@@ -35,9 +40,11 @@ import numpy as np
 from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
 from stickslip.learning.line_model import line_metadata, load_line_model, save_line_model
 from stickslip.learning.line_training import (
+    TYPICAL_FRACTION,
     LineTrainConfig,
     recalibrate_line_ensemble,
     train_line_ensemble,
+    training_effects,
 )
 from stickslip.learning.modelfile import TrainedModel, load_model
 from stickslip.learning.workflow import (
@@ -46,7 +53,7 @@ from stickslip.learning.workflow import (
     clean_window_model,
     sweep_if_missing,
 )
-from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set, lab_config
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERT_SEED, EXPERT_N = PAPER_TRAIN_SEED, 1600  # the bundled window model's training data
@@ -69,9 +76,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4000)
     ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
-    ap.add_argument("--paper", type=int, default=1600,
+    ap.add_argument("--paper", type=int, default=3200,
                     help="clean paper-preset trajectories added to the training data")
     ap.add_argument("--paper-seed", type=int, default=5)
+    ap.add_argument("--typical", type=int, default=3000,
+                    help="trajectories on a typical measurement's substrate (lab_config) added")
+    ap.add_argument("--typical-seed", type=int, default=104)
+    ap.add_argument("--typical-fraction", type=float, default=TYPICAL_FRACTION,
+                    help="fraction of lines given a typical instrument's detector effects")
     ap.add_argument("--members", type=int, default=3)
     ap.add_argument("--epochs", type=int, default=45)
     ap.add_argument("--beta", type=float, default=LineTrainConfig.beta,
@@ -90,6 +102,8 @@ def main() -> None:
     args = ap.parse_args()
     sets = [cached_randomised_set(RandomisedConfig(n=args.n, seed=s), args.work)
             for s in args.seeds]  # fmt: skip
+    if args.typical:
+        sets.append(cached_randomised_set(lab_config(args.typical, args.typical_seed), args.work))
     columns = sorted(sets[0].params)
     if args.paper:
         if args.paper_seed in RESERVED_SEEDS:
@@ -99,7 +113,8 @@ def main() -> None:
     data = concat_datasets(sets, columns)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0],
                           beta=args.beta, beta_var=args.beta_var,
-                          spread_hidden=args.spread_hidden)
+                          spread_hidden=args.spread_hidden,
+                          effects=training_effects(args.typical_fraction))
     if args.recalibrate is not None:
         meta = line_metadata(args.recalibrate)
         # the validation split is only held out if the data and the training settings are

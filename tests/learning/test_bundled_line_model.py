@@ -27,7 +27,7 @@ def test_bench_like_traces(model, tmp_path_factory):
     pred = predict_raw_lines(model, [d.x_nm] * d.n, list(d.force_nN.astype(float)),
                              p["lattice_nm"], p["velocity_nm_per_s"])  # fmt: skip
     rel = {k: np.sqrt(np.mean((pred.values[k] / p[k] - 1) ** 2)) for k in ("U0_eV", "K_N_m")}
-    # bench (600 traces): 6.4 % and 4.1 %, <F> 0.022 nN; these 45: 6.2 %, 4.1 %, 0.020 nN
+    # bench (600 traces): 6.1 % and 3.9 %, <F> 0.021 nN; these 45: 5.7 %, 3.1 %, 0.021 nN
     assert rel["U0_eV"] < 0.09 and rel["K_N_m"] < 0.07, rel
     assert np.sqrt(np.mean((pred.values["F_mean_nN"] - p["F_mean_nN"]) ** 2)) < 0.04
     for k in ("U0_eV", "K_N_m"):
@@ -40,8 +40,8 @@ def test_clean_paper_traces(model):
     n = U0.size
     pred = predict_raw_lines(model, [r.x_nm] * n, list(r.force_nN), np.full(n, 0.246),
                              np.full(n, 60.0))  # fmt: skip
-    # 290 clean traces (lab bench): 0.013 eV, 0.07 N/m (0.5 % and 0.7 %); these 40:
-    # 0.012 eV, and 0.95 of U0 inside the 95 % intervals. The learning issue's figure
+    # 290 clean traces (lab bench): 0.010 eV, 0.07 N/m (0.4 % and 0.6 %); these 40:
+    # 0.0095 eV, and 0.975 of U0 inside the 95 % intervals. The learning issue's figure
     # is 0.0145 eV; the model trained with one beta for means and variances got 0.017
     # here, the one before it 0.028.
     assert model.expert is not None

@@ -1,5 +1,7 @@
 """Whole-line models: lattice mapping, inputs, uncertainty outputs, files, training."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -20,14 +22,18 @@ from stickslip.learning.line import (
 )
 from stickslip.learning.line_model import load_line_model, save_line_model
 from stickslip.learning.line_training import (
+    TRAIN_EFFECTS,
+    TYPICAL_FRACTION,
     LineTrainConfig,
     balanced_scale,
     class_scale,
     flat_substrate,
     train_line_ensemble,
+    training_effects,
 )
 from stickslip.learning.modelfile import ModelFileError, load_model
 from stickslip.simulation import PhysicalSettings, simulate
+from stickslip.simulation.instrument import LAB, EffectsMixture
 from stickslip.simulation.randomised import RandomisedConfig, make_randomised_set
 
 
@@ -297,3 +303,15 @@ def test_spread_head_and_class_calibration_round_trip(tmp_path):
     back = load_line_model(save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {}))
     assert back.classes == ens.classes and back.members[0].spread_hidden == 16
     np.testing.assert_allclose(back.predict_std(X, C)[1], sd, rtol=1e-5)
+
+
+def test_training_prior_mixes_a_typical_instrument_with_the_broad_ranges():
+    prior = LineTrainConfig().effects
+    assert isinstance(prior, EffectsMixture)
+    assert prior.components == (LAB, TRAIN_EFFECTS)
+    assert prior.weights == pytest.approx((TYPICAL_FRACTION, 1 - TYPICAL_FRACTION))
+    assert training_effects(0.0) is TRAIN_EFFECTS
+    # the model file records the whole prior, so a run is reproducible from it
+    saved = json.loads(json.dumps(LineTrainConfig().to_dict()))["effects"]
+    assert saved["components"][0]["white_nN"] == list(LAB.white_nN)
+    assert saved["weights"] == pytest.approx(list(prior.weights))

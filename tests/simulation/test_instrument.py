@@ -1,12 +1,16 @@
 """Instrument effects: each does what it says, and only that."""
 
 import numpy as np
+import pytest
 
 from stickslip.simulation import simulate
 from stickslip.simulation.instrument import (
     LAB,
+    EffectsMixture,
+    InstrumentEffects,
     apply_instrument,
     digitise,
+    draw_instrument,
     lowpass,
     offset_drift,
     pink_noise,
@@ -54,3 +58,26 @@ def test_lab_chain_is_reproducible_and_keeps_the_mean_near():
     np.testing.assert_array_equal(a, b)
     assert set(va) == {"white_nN", "pink_nN", "lowpass_px", "drift_nN", "softening"}
     assert np.all(np.abs(a.mean(axis=1) - r.force_nN.mean(axis=1)) < 0.5)
+
+
+def test_mixture_draws_each_trace_from_one_component_in_proportion():
+    broad = InstrumentEffects(white_nN=(0.1, 0.2), lowpass_px=(2.0, 3.0), bits=16)
+    mix = EffectsMixture((LAB, broad), (0.3, 0.7))
+    v = draw_instrument(mix, 20000, np.random.default_rng(3))
+    in_lab = (v["white_nN"] <= LAB.white_nN[1]) & (v["white_nN"] >= LAB.white_nN[0])
+    in_broad = v["white_nN"] >= 0.1
+    assert np.all(in_lab ^ in_broad)  # the two white ranges do not overlap
+    # every effect of a trace comes from the component its white noise came from
+    assert np.all(v["lowpass_px"][in_lab] <= LAB.lowpass_px[1])
+    assert np.all(v["lowpass_px"][in_broad] >= 2.0)
+    assert np.all(v["pink_nN"][in_broad] == 0.0) and np.any(v["pink_nN"][in_lab] > 0)
+    assert abs(in_lab.mean() - 0.3) < 0.015
+    F, _ = apply_instrument(np.zeros((4, 64)), mix, np.random.default_rng(0))
+    assert F.shape == (4, 64) and np.all(np.isfinite(F))
+
+
+def test_mixture_rejects_bad_weights_and_mixed_resolutions():
+    for comps, w in (((LAB,), (0.5, 0.5)), ((LAB, LAB), (0.7, 0.7)),
+                     ((LAB, LAB.replace(bits=12)), (0.5, 0.5))):  # fmt: skip
+        with pytest.raises(ValueError):
+            EffectsMixture(comps, w)

@@ -148,17 +148,49 @@ LAB = InstrumentEffects(
 )
 
 
-def draw_instrument(effects: InstrumentEffects, n: int, rng: np.random.Generator):
-    """Per-trace effect values (dict of arrays of length ``n``) drawn from the ranges."""
-    return {
-        name: rng.uniform(*getattr(effects, name), n)
-        for name in ("white_nN", "pink_nN", "lowpass_px", "drift_nN", "softening")
-    }
+EFFECT_NAMES = ("white_nN", "pink_nN", "lowpass_px", "drift_nN", "softening")
+
+
+@dataclass(frozen=True)
+class EffectsMixture:
+    """Instruments drawn per trace: each trace takes its effect values from one of
+    ``components``, chosen with probabilities ``weights``.
+
+    A training prior that is dense where measurements usually are (a typical
+    instrument) and still covers broad ranges as a tail. All components share one ADC
+    resolution ``bits``.
+    """
+
+    components: tuple[InstrumentEffects, ...]
+    weights: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.components) != len(self.weights) or not self.components:
+            raise ValueError("EffectsMixture needs one weight per component")
+        if min(self.weights) < 0 or not np.isclose(sum(self.weights), 1.0):
+            raise ValueError(f"mixture weights must be >= 0 and sum to 1, not {self.weights}")
+        if len({c.bits for c in self.components}) != 1:
+            raise ValueError("the mixture's components must share one ADC resolution")
+
+    @property
+    def bits(self) -> int:
+        return self.components[0].bits
+
+
+def draw_instrument(effects: InstrumentEffects | EffectsMixture, n: int,
+                    rng: np.random.Generator) -> dict[str, np.ndarray]:  # fmt: skip
+    """Per-trace effect values (dict of arrays of length ``n``) drawn from the ranges
+    (for a mixture: each trace from the component it draws)."""
+    if isinstance(effects, EffectsMixture):
+        pick = rng.choice(len(effects.weights), size=n, p=np.asarray(effects.weights))
+        draws = [draw_instrument(c, n, rng) for c in effects.components]
+        return {name: np.choose(pick, [d[name] for d in draws]) for name in EFFECT_NAMES}
+    return {name: rng.uniform(*getattr(effects, name), n) for name in EFFECT_NAMES}
 
 
 def apply_instrument(
     force_nN: np.ndarray,
-    effects: InstrumentEffects,
+    effects: InstrumentEffects | EffectsMixture,
     rng: np.random.Generator,
     values: dict[str, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
