@@ -18,6 +18,7 @@ import numpy as np
 
 from stickslip.estimation import estimate_array
 from stickslip.estimation import estimator as E
+from stickslip.evaluation.bench import in_eta_window
 from stickslip.evaluation.plots_classical import parity_plot
 from stickslip.simulation.config import PhysicalSettings
 from stickslip.simulation.simulate import simulate
@@ -35,7 +36,7 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     U, K = rng.uniform(0.3, 6.0, 30 * args.n), rng.uniform(1.0, 50.0, 30 * args.n)
     e = eta_from(U, K, s.lattice_nm)
-    keep = (e >= 1.5) & (e <= 40)
+    keep = in_eta_window(e)
     U, K, eta = U[keep][: args.n], K[keep][: args.n], e[keep][: args.n]
     t0 = time.perf_counter()
     sim = simulate(U, K, s, seed=args.seed)

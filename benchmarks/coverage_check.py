@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from stickslip.data.dataset import Dataset, load_dataset
-from stickslip.evaluation.bench import BENCH_SEED, BenchConfig, make_bench
+from stickslip.evaluation.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.evaluation.calibration import coverage
 from stickslip.learning.line import predict_raw_lines
 from stickslip.learning.line_model import load_line_model
@@ -58,10 +58,8 @@ def lab_prior(work: Path, n: int) -> Dataset:
 
 def bench(work: Path, seed: int, n_per_material: int) -> Dataset:
     """A lab bench drawn with ``seed`` (cached)."""
-    path = work / f"bench_{n_per_material}_{seed}.h5"
-    if not path.exists():
-        make_bench(BenchConfig(n_per_material=n_per_material, seed=seed), path)
-    return load_dataset(path)
+    config = BenchConfig(n_per_material=n_per_material, seed=seed)
+    return load_dataset(bench_if_missing(config, work / f"bench_{n_per_material}_{seed}.h5"))
 
 
 def scored(ds: Dataset, model) -> dict:
@@ -69,7 +67,7 @@ def scored(ds: Dataset, model) -> dict:
     p = ds.params
     lp = predict_raw_lines(model, [ds.x_nm] * ds.n, list(ds.force_nN.astype(float)),
                            p["lattice_nm"], p["velocity_nm_per_s"])  # fmt: skip
-    ok = (p["eta"] >= 1.5) & (p["eta"] <= 40)
+    ok = in_eta_window(p["eta"])
     n = int(ok.sum())
     out: dict = {"n": n}
     for level, lo, hi in (("95", lp.lo95, lp.hi95), ("68", lp.lo68, lp.hi68)):

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.bench import BenchConfig, make_bench
+from stickslip.evaluation.bench import BenchConfig, bench_if_missing, in_eta_window
 from stickslip.learning.line import predict_raw_lines
 from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig, train_line_ensemble
 from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
@@ -37,11 +37,9 @@ def main() -> None:
     # on the reference lattice, no pristine oversampling
     rcfg = RandomisedConfig(seed=101, reference_fraction=0.0)
     data = cached_randomised_set(rcfg, args.work)
-    if not args.bench.exists():
-        make_bench(BenchConfig(), args.bench)
-    bench = load_dataset(args.bench)
+    bench = load_dataset(bench_if_missing(BenchConfig(), args.bench))
     p = bench.params
-    ok = (p["eta"] >= 1.5) & (p["eta"] <= 40)
+    ok = in_eta_window(p["eta"])
     variants = {"all effects": (TRAIN_EFFECTS, 0.2), "none (clean training)": (TRAIN_EFFECTS, 1.0)}
     for name in EFFECTS:
         variants[f"all but {name}"] = (TRAIN_EFFECTS.replace(**{name: (0.0, 0.0)}), 0.2)

@@ -33,7 +33,7 @@ import numpy as np
 
 from stickslip.data.dataset import concat_datasets, load_dataset
 from stickslip.data.trace import Trace
-from stickslip.evaluation.bench import BenchConfig, make_bench
+from stickslip.evaluation.bench import BenchConfig, bench_if_missing, in_eta_window
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.modelfile import load_model, save_model
 from stickslip.learning.randomised_windows import (
@@ -123,16 +123,14 @@ def main() -> None:
         mlps[f"MLP {r} (DR)"] = model
     line_model = load_line_model()
 
-    bench_path = LAB / "bench_200.h5"
-    if not bench_path.exists():
-        make_bench(BenchConfig(n_per_material=200), bench_path)
+    bench_path = bench_if_missing(BenchConfig(n_per_material=200), LAB / "bench_200.h5")
     sets = {"clean": load_dataset(sweep_if_missing(LAB / "clean.h5", 300, CLEAN_TEST_SEED)),
             "bench": load_dataset(bench_path)}  # fmt: skip
     summary: dict = {"machine": machine, "args": {k: str(v) for k, v in vars(args).items()},
                      "training": training, "scores": {}}  # fmt: skip
     for set_name, ds in sets.items():
         truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
-        ok = (truth["eta"] >= 1.5) & (truth["eta"] <= 40)
+        ok = in_eta_window(truth["eta"])
         preds = predictions(ds, line_model, mlps)
         f_net = net_friction(ds, mlps)
         for g, mask in groups(set_name, ds, ok).items():

@@ -34,7 +34,7 @@ from stickslip.data.trace import Trace
 from stickslip.estimation import estimate_array
 from stickslip.estimation import estimator as E
 from stickslip.estimation.baseline import five_line_estimate
-from stickslip.evaluation.bench import MATERIALS, BenchConfig, make_bench
+from stickslip.evaluation.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
 from stickslip.learning.inference import predict_traces
 from stickslip.learning.line import Z95, predict_raw_lines
@@ -136,9 +136,8 @@ def main() -> None:
 
     line_model = load_line_model(args.line_model)
     mlps = {f"MLP {r}": window_model(args.work, r, args.epochs) for r in ("raw", "pi")}
-    bench_path = args.work / f"bench_{args.n_per_material}.h5"
-    if not bench_path.exists():
-        make_bench(BenchConfig(n_per_material=args.n_per_material), bench_path)
+    bench_path = bench_if_missing(BenchConfig(n_per_material=args.n_per_material),
+                                  args.work / f"bench_{args.n_per_material}.h5")  # fmt: skip
     clean = sweep_if_missing(args.work / "clean.h5", args.n_clean, CLEAN_TEST_SEED)
     sets = {"clean": load_dataset(clean),
             "bench": load_dataset(bench_path),
@@ -146,7 +145,7 @@ def main() -> None:
     summary: dict = {}
     for set_name, ds in sets.items():
         truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
-        ok = (truth["eta"] >= 1.5) & (truth["eta"] <= 40)
+        ok = in_eta_window(truth["eta"])
         preds = predictions(ds, line_model, mlps)
         for g, mask in groups(set_name, ds, ok).items():
             print(f"\n{g}: {int(mask.sum())} traces with 1.5 <= eta <= 40")

@@ -37,6 +37,14 @@ from stickslip.units import eta_from
 
 MATERIALS: dict[str, float] = {"graphite": 0.246, "MoS2": 0.316, "WS2": 0.315}
 BENCH_SEED = 20261121
+#: The eta range of the bench's draws and of the targets' scoring (stick-slip regime).
+ETA_WINDOW = (1.5, 40.0)
+
+
+def in_eta_window(eta: np.ndarray) -> np.ndarray:
+    """Boolean mask of the traces with ``eta`` inside :data:`ETA_WINDOW` (ends included)."""
+    eta = np.asarray(eta)
+    return (eta >= ETA_WINDOW[0]) & (eta <= ETA_WINDOW[1])
 
 
 @dataclass(frozen=True)
@@ -47,12 +55,21 @@ class BenchConfig:
     seed: int = BENCH_SEED
     velocity_nm_per_s: float = 30.0
     temperature_K: float = 296.0
-    ranges: ParameterRange = field(default_factory=lambda: ParameterRange(eta=(1.5, 40.0)))
+    ranges: ParameterRange = field(default_factory=lambda: ParameterRange(eta=ETA_WINDOW))
     substrate: SubstrateAugmentation = LAB_SUBSTRATE
     instrument: InstrumentEffects = LAB
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), sort_keys=True)
+
+
+def bench_if_missing(config: BenchConfig, path: str | os.PathLike) -> Path:
+    """``path``, simulated with ``config`` first if it does not exist yet (a cache: an
+    existing file is used as it is)."""
+    path = Path(path)
+    if not path.exists():
+        make_bench(config, path)
+    return path
 
 
 def make_bench(config: BenchConfig, out: str | os.PathLike, progress: bool = True) -> Path:

@@ -334,15 +334,16 @@ class SpreadClasses:
         lattice_ratio : ndarray (B,)
             ``a / a0`` of each line (1: recorded on the reference lattice).
         """
-        level = noise_level(force_nN)
-        on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
-        noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
-        return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy)
+        return self._from_level(noise_level(force_nN), lattice_ratio)
 
     def classify_lines(self, lines: list[np.ndarray], lattice_ratio: np.ndarray) -> np.ndarray:
         """:meth:`classify` for mapped lines of any lengths."""
-        return np.array([self.classify(f[None], [r])[0]
-                         for f, r in zip(lines, lattice_ratio, strict=True)], int)  # fmt: skip
+        return self._from_level(np.array([noise_level(f) for f in lines]), lattice_ratio)
+
+    def _from_level(self, level: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
+        on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
+        noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
+        return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy).astype(int)
 
     def to_dict(self) -> dict:
         return asdict(self)
