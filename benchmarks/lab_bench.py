@@ -37,7 +37,7 @@ from stickslip.estimation.baseline import five_line_estimate
 from stickslip.evaluation.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
 from stickslip.learning.inference import predict_traces
-from stickslip.learning.line import Z95, predict_raw_lines
+from stickslip.learning.line import predict_raw_lines
 from stickslip.learning.line_training import LineTrainConfig
 from stickslip.learning.workflow import (
     CLEAN_TEST_SEED,
@@ -165,10 +165,13 @@ def main() -> None:
         rate = len(ds.force_nN) / preds["line CNN"]["_seconds"]
         print(f"line CNN inference incl. mapping: {rate:.0f} traces/s")
         curves = {}
-        for k, log in (("F_mean_nN", False), ("U0_eV", True), ("K_N_m", True), ("eta", True)):
-            sig = (np.log(lp.hi95[k]) - np.log(lp.values[k])) / Z95 if log else lp.std[k]
+        for j, (k, log) in enumerate((("F_mean_nN", False), ("U0_eV", True), ("K_N_m", True),
+                                      ("eta", True))):  # fmt: skip
+            # the model's own interval shape: calibrated std times z_at(level)
             loc = np.log(lp.values[k]) if log else lp.values[k]
-            curves[k] = reliability(truth[k][ok], loc[ok], sig[ok], log)
+            sig = ((np.log(lp.hi95[k]) if log else lp.hi95[k]) - loc) / line_model.z_at(0.95)[j]
+            curves[k] = reliability(truth[k][ok], loc[ok], sig[ok], log,
+                                    z_of_level=lambda q, j=j: line_model.z_at(q)[j])  # fmt: skip
         reliability_plot(curves, f"line CNN calibration: {set_name}",
                          args.work / f"calibration_{set_name.replace(' ', '_')}.png")  # fmt: skip
     (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -21,12 +21,14 @@
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
 --recalibrate MODEL skips step 2's training: it re-fits only the spread calibration of
-MODEL (trained by this script with the same arguments) on the same validation lines.
+MODEL (trained by this script with the same arguments, the calibration's own settings
+--calibration-draws and --spread-power aside) on the same validation trajectories.
 
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--typical 3000]
        [--typical-seed 104] [--typical-fraction 0.8] [--paper 3200] [--paper-seed 5]
        [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
-       [--spread-hidden 128] [--work build/line-train] [--out PATH] [--recalibrate MODEL]
+       [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power]
+       [--work build/line-train] [--out PATH] [--recalibrate MODEL]
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ import numpy as np
 from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
 from stickslip.learning.line_model import line_metadata, load_line_model, save_line_model
 from stickslip.learning.line_training import (
+    CALIBRATION_FIELDS,
     TYPICAL_FRACTION,
     LineTrainConfig,
     recalibrate_line_ensemble,
@@ -92,6 +95,11 @@ def main() -> None:
                     help="beta-NLL weight of the variances' gradient")
     ap.add_argument("--spread-hidden", type=int, default=LineTrainConfig.spread_hidden,
                     help="width of a spread head of its own (0: rows of the means' head)")
+    ap.add_argument("--calibration-draws", type=int, default=LineTrainConfig.calibration_draws,
+                    help="draws of the detector effects on the validation lines to calibrate on")
+    ap.add_argument("--spread-power", action=argparse.BooleanOptionalAction,
+                    default=LineTrainConfig.spread_power,
+                    help="calibrated std c * sd**gamma per class (--no-spread-power: gamma 1)")
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--recalibrate", type=Path, default=None,
@@ -114,13 +122,15 @@ def main() -> None:
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0],
                           beta=args.beta, beta_var=args.beta_var,
                           spread_hidden=args.spread_hidden,
-                          effects=training_effects(args.typical_fraction))
+                          effects=training_effects(args.typical_fraction),
+                          calibration_draws=args.calibration_draws,
+                          spread_power=args.spread_power)
     if args.recalibrate is not None:
         meta = line_metadata(args.recalibrate)
         # the validation split is only held out if the data and the training settings are
-        # the ones the model was trained with (the calibration classes may differ)
-        trained = {k: v for k, v in meta["train_config"].items() if k != "spread_classes"}
-        asked = {k: v for k, v in cfg.to_dict().items() if k != "spread_classes"}
+        # the ones the model was trained with (the calibration settings may differ)
+        trained = {k: v for k, v in meta["train_config"].items() if k not in CALIBRATION_FIELDS}
+        asked = {k: v for k, v in cfg.to_dict().items() if k not in CALIBRATION_FIELDS}
         if meta["dataset"].get("sets") != described or json.dumps(
             trained, sort_keys=True) != json.dumps(asked, sort_keys=True):  # fmt: skip
             ap.error(f"{args.recalibrate} was not trained with these data and settings")

@@ -9,6 +9,7 @@ import torch
 from stickslip.data.dataset import load_dataset
 from stickslip.learning.line import (
     N_EXPERT,
+    Z68,
     Z95,
     LineCNN,
     LineEnsemble,
@@ -26,8 +27,10 @@ from stickslip.learning.line_training import (
     TYPICAL_FRACTION,
     LineTrainConfig,
     balanced_scale,
-    class_scale,
+    calibration_set,
+    class_fit,
     flat_substrate,
+    power_fit,
     train_line_ensemble,
     training_effects,
 )
@@ -174,9 +177,12 @@ def test_training_report_separates_pristine_and_corrupted_validation():
     cfg = LineTrainConfig(members=1, epochs=1, batch_size=32, val_fraction=0.25, mse_epochs=1,
                           spread_classes=None)  # one scale row: strata weigh equally
     _, report = train_line_ensemble(force, x, params, cfg, LineSpec(crop=200), progress=False)
-    flat_val = report["val_pristine"]["n"]
-    assert report["val_corrupted"]["n"] == 30 and 5 <= flat_val <= 25
+    # the calibration reads every validation line under calibration_draws draws of effects
+    draws = cfg.calibration_draws
+    flat_val = report["val_pristine"]["n"] // draws
+    assert report["val_corrupted"]["n"] == 30 * draws and 5 <= flat_val <= 25
     assert report["n_val"] == 30 + flat_val
+    assert report["n_calibration"] == draws * report["n_val"]
     for stratum in ("val_pristine", "val_corrupted"):
         assert set(report[stratum]["coverage95"]) == {"F_mean_nN", "log_U0_ref", "log_K_ref",
                                                       "log_eta"}  # fmt: skip
@@ -272,18 +278,54 @@ def test_spread_classes_read_noise_level_and_resampling():
     assert levels == [0, 2, 4]
 
 
-def test_class_scale_gives_each_class_its_coverage():
+def test_class_fit_gives_each_class_its_coverage():
     rng = np.random.default_rng(2)
     cls = np.repeat([0, 1, 2], [400, 2000, 10])
     # class 0 errors 3x smaller than its predicted spread, class 1 as predicted
-    z = np.abs(rng.normal(size=(cls.size, 2))) * np.where(cls == 0, 1 / 3, 1.0)[:, None]
-    S = class_scale(z, cls, 3, np.zeros(cls.size, int))
+    sd = rng.uniform(0.5, 2.0, (cls.size, 2))
+    err = np.abs(rng.normal(size=(cls.size, 2))) * sd * np.where(cls == 0, 1 / 3, 1.0)[:, None]
+    S, g = class_fit(err, sd, cls, 3, np.zeros(cls.size, int), power=False)
+    assert np.all(g == 1.0)
     for c in (0, 1):
-        cov = np.mean(z[cls == c] / S[c] <= Z95, axis=0)
+        cov = np.mean(err[cls == c] / (S[c] * sd[cls == c]) <= Z95, axis=0)
         assert np.all(np.abs(cov - 0.95) < 0.01)
     assert np.allclose(S[0], 1 / 3, rtol=0.15) and np.allclose(S[1], 1.0, rtol=0.1)
     # a class with too few validation lines gets the pooled scale
-    assert np.allclose(S[2], balanced_scale(z, np.zeros(cls.size, int)))
+    assert np.allclose(S[2], balanced_scale(err / sd, np.zeros(cls.size, int)))
+
+
+def test_power_fit_finds_a_spread_that_under_reacts():
+    rng = np.random.default_rng(4)
+    # the networks' spread sd under-reacts: the true error scale is 0.5 sd**1.5
+    sd = np.exp(rng.uniform(-3, 0, (20000, 1)))
+    err = np.abs(rng.normal(size=sd.shape)) * 0.5 * sd**1.5
+    scale, exponent = power_fit(err, sd, np.ones(sd.shape[0]))
+    assert exponent[0] == pytest.approx(1.5, abs=0.05)
+    assert scale[0] == pytest.approx(0.5, rel=0.15)
+    # 95 % coverage at both ends of the spread's range, where a plain scale fails
+    cal = scale * sd**exponent
+    small, large = sd[:, 0] < np.exp(-2.5), sd[:, 0] > np.exp(-0.5)
+    for m in (small, large):
+        assert abs(np.mean(err[m] / cal[m] <= Z95) - 0.95) < 0.015
+    plain = balanced_scale(err / sd, np.zeros(sd.shape[0], int)) * sd
+    assert np.mean(err[small] / plain[small] <= Z95) > 0.99
+    assert np.mean(err[large] / plain[large] <= Z95) < 0.90
+
+
+def test_z_at_reads_the_calibrated_error_distribution():
+    ens = _untrained()
+    assert ens.z_at(0.68) == pytest.approx([Z68] * 4, rel=1e-5)
+    assert ens.z_at(0.95) == pytest.approx([Z95] * 4, rel=1e-5)
+    # heavy tails (Student t, 3 dof): the 68 % half-width is narrower than a Gaussian's
+    # of the same 95 % width
+    from stickslip.learning.line import SHAPE_LEVELS
+
+    z = np.abs(np.random.default_rng(0).standard_t(3, 200000))
+    z *= Z95 / np.quantile(z, 0.95)
+    ens.shape = np.tile(np.quantile(z, SHAPE_LEVELS), (4, 1))
+    assert ens.z_at(0.95) == pytest.approx([Z95] * 4, rel=1e-3)
+    assert np.all(ens.z_at(0.68) < 0.85 * Z68)
+    assert np.mean(z <= ens.z_at(0.5)[0]) == pytest.approx(0.5, abs=0.005)
 
 
 def test_spread_head_and_class_calibration_round_trip(tmp_path):
@@ -303,6 +345,15 @@ def test_spread_head_and_class_calibration_round_trip(tmp_path):
     back = load_line_model(save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {}))
     assert back.classes == ens.classes and back.members[0].spread_hidden == 16
     np.testing.assert_allclose(back.predict_std(X, C)[1], sd, rtol=1e-5)
+    assert back.exponent is None and back.shape is None  # a file without them: plain
+    # with an exponent and a shape, the calibrated std is scale * raw ** exponent
+    ens.exponent = np.full((5, 4), 1.5)
+    ens.shape = np.tile(np.linspace(0.1, 3.0, 99), (4, 1))
+    np.testing.assert_allclose(ens.predict_std(X, C)[1],
+                               ens.scale[[0, 4]] * raw**1.5, rtol=1e-5)  # fmt: skip
+    back = load_line_model(save_line_model(ens, tmp_path / "m.pt", (16, 32, 48, 64), {}, {}, {}))
+    np.testing.assert_allclose(back.predict_std(X, C)[1], ens.predict_std(X, C)[1], rtol=1e-5)
+    np.testing.assert_allclose(back.z_at(0.68), ens.z_at(0.68))
 
 
 def test_training_prior_mixes_a_typical_instrument_with_the_broad_ranges():
@@ -315,3 +366,20 @@ def test_training_prior_mixes_a_typical_instrument_with_the_broad_ranges():
     saved = json.loads(json.dumps(LineTrainConfig().to_dict()))["effects"]
     assert saved["components"][0]["white_nN"] == list(LAB.white_nN)
     assert saved["weights"] == pytest.approx(list(prior.weights))
+
+
+def test_calibration_set_draws_the_effects_afresh_on_the_validation_lines():
+    rng = np.random.default_rng(3)
+    n, x = 40, np.arange(300) * LineSpec().pixel_nm
+    force = np.array([k * 0.246 * ((x / 0.246) % 1.0) for k in rng.uniform(2, 20, n)])
+    params = {"U0_eV": np.ones(n), "lattice_nm": np.full(n, 0.246),
+              "velocity_nm_per_s": np.full(n, 60.0), "mod_amplitude": np.full(n, 0.1)}  # fmt: skip
+    cfg = LineTrainConfig(calibration_draws=3, clean_fraction=0.0)
+    val = np.arange(10)
+    cs = calibration_set(force, x, params, val, cfg, LineSpec())
+    assert len(cs.lines) == 30 and list(cs.rows) == list(val) * 3
+    again = calibration_set(force, x, params, val, cfg, LineSpec()).lines
+    assert all(np.array_equal(a, b) for a, b in zip(cs.lines, again, strict=True))  # seeded
+    # each draw corrupts the same clean line differently
+    assert not np.allclose(cs.lines[0], cs.lines[10]) and not np.allclose(cs.lines[10],
+                                                                           cs.lines[20])

@@ -55,6 +55,9 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
         "metrics": _plain(metrics),
     }
     payload["spread_hidden"] = ens.members[0].spread_hidden
+    for key in ("exponent", "shape"):  # absent: a plain scale and Gaussian intervals
+        if getattr(ens, key) is not None:
+            payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
     if ens.classes is not None:
         payload["spread_classes"] = _plain(ens.classes.to_dict())
     if ens.expert is not None:
@@ -100,6 +103,8 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             scale=payload["scale"].numpy(),
             expert=expert,
             classes=classes,
+            exponent=payload["exponent"].numpy() if "exponent" in payload else None,
+            shape=payload["shape"].numpy() if "shape" in payload else None,
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__

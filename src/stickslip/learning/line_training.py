@@ -31,6 +31,16 @@ the ratio moves with the noise level. The calibration therefore fits a scale per
 target and per class of line (:class:`~stickslip.learning.line.SpreadClasses`, read off
 the line itself: quiet on the reference lattice, quiet and resampled, noisy by noise
 level), so that the 95 % interval covers 95 % of the validation truths in each class.
+
+Calibration lines. A 95 % quantile read off one draw of the effects on the validation
+trajectories (a few hundred lines per class) carries a sampling error of about 0.01 in
+coverage, as large as the differences it is meant to fix. The calibration therefore
+reads ``calibration_draws`` independent draws of the detector effects on the same
+validation trajectories (the first is the validation set that training follows).
+Within a class the calibrated std is ``c * sd ** gamma`` (:func:`power_fit`: the 95 %
+quantile of the error, regressed on the ensemble's own spread), and the calibrated
+lines' standardised errors give the intervals' shape at every level
+(:meth:`~stickslip.learning.line.LineEnsemble.z_at`).
 """
 
 from __future__ import annotations
@@ -45,8 +55,8 @@ from tqdm.auto import tqdm
 
 from stickslip.learning.line import (
     N_EXPERT,
+    SHAPE_LEVELS,
     TARGETS,
-    Z68,
     Z95,
     LineCNN,
     LineEnsemble,
@@ -81,6 +91,13 @@ TRAIN_EFFECTS = InstrumentEffects(
 #: Fraction of training lines given a typical careful measurement's detector effects.
 TYPICAL_FRACTION = 0.8
 
+#: Settings only the spread calibration reads: a trained model can be re-calibrated
+#: with other values (``scripts/train_line_model.py --recalibrate``).
+CALIBRATION_FIELDS = ("spread_classes", "calibration_draws", "spread_power")
+
+#: Exponents tried by :func:`power_fit`.
+EXPONENTS = np.linspace(0.5, 2.0, 61)
+
 
 def training_effects(typical_fraction: float) -> InstrumentEffects | EffectsMixture:
     """Detector effects of training: :data:`TRAIN_EFFECTS`, or a mixture in which a
@@ -114,6 +131,8 @@ class LineTrainConfig:
     spread_hidden: int = 128  # > 0: the log-variances get a head of their own (LineCNN)
     # classes of lines calibrated separately (None: one scale per target for all lines)
     spread_classes: SpreadClasses | None = field(default_factory=SpreadClasses)
+    calibration_draws: int = 8  # draws of the detector effects on the validation lines
+    spread_power: bool = True  # calibrated std c * sd**gamma (False: gamma = 1)
     # detector effects: a typical measurement's for most lines, the broad ranges for the rest
     effects: InstrumentEffects | EffectsMixture = field(
         default_factory=lambda: training_effects(TYPICAL_FRACTION))
@@ -168,18 +187,55 @@ def flat_substrate(params: dict[str, np.ndarray]) -> np.ndarray:
     return flat
 
 
-def balanced_scale(z_abs: np.ndarray, strata: np.ndarray, level: float = 0.95) -> np.ndarray:
-    """Per-column scale ``c`` such that ``|z| / c <= Z95`` holds for ``level`` of the rows,
-    each stratum weighing the same whatever its size (a weighted quantile of ``|z|``)."""
+def _stratum_weights(strata: np.ndarray) -> np.ndarray:
+    """Row weights with which every stratum weighs the same whatever its size."""
     w = np.zeros(strata.size)
     for g in np.unique(strata):
         w[strata == g] = 1.0 / np.sum(strata == g)
-    out = np.empty(z_abs.shape[1])
-    for j in range(z_abs.shape[1]):
-        order = np.argsort(z_abs[:, j])
-        cw = np.cumsum(w[order]) / w.sum()
-        out[j] = z_abs[order, j][min(np.searchsorted(cw, level), cw.size - 1)] / Z95
-    return out
+    return w
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level):
+    """Quantile(s) of ``values`` at ``level`` (a float or an array), rows weighted."""
+    order = np.argsort(values)
+    cw = np.cumsum(weights[order]) / weights.sum()
+    return values[order][np.minimum(np.searchsorted(cw, level), cw.size - 1)]
+
+
+def balanced_scale(z_abs: np.ndarray, strata: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """Per-column scale ``c`` such that ``|z| / c <= Z95`` holds for ``level`` of the rows,
+    each stratum weighing the same whatever its size (a weighted quantile of ``|z|``)."""
+    w = _stratum_weights(strata)
+    return np.array([_weighted_quantile(z_abs[:, j], w, level) / Z95
+                     for j in range(z_abs.shape[1])])  # fmt: skip
+
+
+def power_fit(err_abs: np.ndarray, sd: np.ndarray, weights: np.ndarray, level: float = 0.95,
+              exponents: np.ndarray = EXPONENTS) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Calibrated spread ``scale * sd ** exponent`` per column of (N, T) errors and stds.
+
+    ``Z95 * scale * sd ** exponent`` is a linear quantile regression at ``level`` of
+    ``ln |error|`` on ``ln sd`` (weighted rows; the exponent from a grid, the one of least
+    pinball loss, the offset then exact): the ``level`` quantile of ``|error|`` given the
+    spread, since quantiles commute with ``ln``. Exponent 1 is a plain scale factor.
+
+    Returns
+    -------
+    scale, exponent : ndarray (T,)
+    """
+    w = weights / weights.sum()
+    scale, exponent = np.empty(err_abs.shape[1]), np.empty(err_abs.shape[1])
+    for j in range(err_abs.shape[1]):
+        le, ls = np.log(err_abs[:, j] + 1e-12), np.log(sd[:, j])
+        best = np.inf
+        for g in exponents:
+            r = le - g * ls
+            a = _weighted_quantile(r, w, level)
+            u = r - a
+            loss = np.sum(w * np.maximum(level * u, (level - 1.0) * u))
+            if loss < best - 1e-12:
+                best, scale[j], exponent[j] = loss, np.exp(a) / Z95, g
+    return scale, exponent
 
 
 def _standardise_friction(Y: np.ndarray, observed_mean: np.ndarray, y_mean, y_std):
@@ -216,9 +272,10 @@ class ValidationSet:
 
 
 def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
-                   spec: LineSpec) -> ValidationSet:  # fmt: skip
-    """The validation lines of :func:`train_line_ensemble` (one fixed draw of effects)."""
-    val_rng = np.random.default_rng([config.seed, 999])
+                   spec: LineSpec, draw: int = 0) -> ValidationSet:  # fmt: skip
+    """The validation lines of :func:`train_line_ensemble` (one fixed draw of effects;
+    ``draw`` > 0: another independent one, for the calibration)."""
+    val_rng = np.random.default_rng([config.seed, 999, draw] if draw else [config.seed, 999])
     val_p = val[flat_substrate(params)[val]]
     a = params["lattice_nm"]
     corrupted, mean_c = corrupt_and_map(force_nN[val], a[val], x_nm, spec, config.effects,
@@ -237,6 +294,23 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     )
 
 
+def calibration_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
+                    spec: LineSpec) -> ValidationSet:  # fmt: skip
+    """The validation trajectories under ``config.calibration_draws`` independent draws of
+    the detector effects (the first is :func:`validation_set`'s), as one set."""
+    sets = [validation_set(force_nN, x_nm, params, val, config, spec, draw=k)
+            for k in range(max(1, config.calibration_draws))]  # fmt: skip
+    lines = [f for vs in sets for f in vs.lines]
+    return ValidationSet(
+        lines=lines,
+        X=line_inputs(lines, spec),
+        C=torch.cat([vs.C for vs in sets]),
+        rows=np.concatenate([vs.rows for vs in sets]),
+        strata=np.concatenate([vs.strata for vs in sets]),
+        observed_mean=np.concatenate([vs.observed_mean for vs in sets]),
+    )
+
+
 def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
              rng: np.random.Generator) -> tuple[np.ndarray, ValidationSet, np.ndarray]:  # fmt: skip
     """Training indices, validation lines and the target matrix (:func:`line_targets`) of
@@ -249,87 +323,123 @@ def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
     return train, vs, Y
 
 
-def class_scale(z_abs: np.ndarray, classes: np.ndarray, n_classes: int, strata: np.ndarray,
-                min_lines: int = 30) -> np.ndarray:  # fmt: skip
-    """Scales (n_classes, n_targets): 95 % of each class's lines inside the interval (its
-    lines weighing equally: the class, not the stratum, now says what kind of line it
-    is); a class with fewer than ``min_lines`` validation lines gets the pooled scale,
-    strata weighing equally (:func:`balanced_scale`)."""
-    out = np.tile(balanced_scale(z_abs, strata), (n_classes, 1))
+def class_fit(err_abs: np.ndarray, sd: np.ndarray, classes: np.ndarray, n_classes: int,
+              strata: np.ndarray, power: bool = True,
+              min_lines: int = 30) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Calibrated spread per class, (scale, exponent) each (n_classes, n_targets): 95 % of
+    each class's lines inside the interval (its lines weighing equally: the class, not
+    the stratum, now says what kind of line it is); :func:`power_fit` when ``power``,
+    else a plain scale (exponent 1). A class with fewer than ``min_lines`` lines gets the
+    pooled fit, strata weighing equally."""
+
+    def fit(m: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if power:
+            return power_fit(err_abs[m], sd[m], w)
+        z = err_abs[m] / sd[m]
+        return np.array([_weighted_quantile(z[:, j], w, 0.95) / Z95
+                         for j in range(z.shape[1])]), np.ones(z.shape[1])  # fmt: skip
+
+    pooled = fit(np.ones(classes.size, bool), _stratum_weights(strata))
+    scale, exponent = (np.tile(p, (n_classes, 1)) for p in pooled)
     for c in range(n_classes):
         m = classes == c
         if m.sum() >= min_lines:
-            out[c] = balanced_scale(z_abs[m], np.zeros(int(m.sum()), int))
-    return out
+            scale[c], exponent[c] = fit(m, np.ones(int(m.sum())))
+    return scale, exponent
 
 
-def calibrate(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray,
-              classes: SpreadClasses | None = None):  # fmt: skip
-    """Fit ``ens.scale`` on a validation set (targets ``Y_val`` in :func:`line_targets`
-    units; strata weighing equally, :func:`balanced_scale`), per class of line when
-    ``classes`` is given (:func:`class_scale`); returns the standardised predictive
-    means, the calibrated ``|z|`` and the class of every validation line."""
-    ens.scale, ens.classes = np.ones(len(TARGETS)), classes
-    mu, sd = predict_std_lines(ens, vs.lines, vs.C)
-    Yv = _standardise_friction(Y_val, vs.observed_mean, ens.y_mean, ens.y_std).numpy()
-    z = np.abs(mu - Yv) / sd
+def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
+              classes: SpreadClasses | None = None, power: bool = True):  # fmt: skip
+    """Fit the spread calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
+    :func:`line_targets` units): per class of line when ``classes`` is given (else one
+    class, strata weighing equally), :func:`class_fit`, then the standardised errors'
+    quantiles (``ens.shape``). Returns the standardised predictive means, the calibrated
+    ``|z|`` and the class of every calibration line."""
+    ens.scale, ens.exponent, ens.shape, ens.classes = np.ones(len(TARGETS)), None, None, classes
+    mu, sd = predict_std_lines(ens, cs.lines, cs.C)
+    err = np.abs(mu - _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean,
+                                            ens.y_std).numpy())  # fmt: skip
     if classes is None:
-        ens.scale = balanced_scale(z, vs.strata)
-        return mu, z / ens.scale, np.zeros(len(vs.lines), int)
-    cls = classes.classify_lines(vs.lines, vs.C[:, 0].numpy().astype(float) + 1.0)
-    ens.scale = class_scale(z, cls, classes.n, vs.strata)
-    return mu, z / ens.scale[cls], cls
+        cls, n_classes = np.zeros(len(cs.lines), int), 1
+    else:
+        cls = classes.classify_lines(cs.lines, cs.C[:, 0].numpy().astype(float) + 1.0)
+        n_classes = classes.n
+    scale, exponent = class_fit(err, sd, cls, n_classes, cs.strata, power)
+    z_cal = err / (scale[cls] * sd ** exponent[cls])
+    ens.scale, ens.exponent = (scale, exponent) if classes else (scale[0], exponent[0])
+    # weighed as in the fit: lines equally within classes, strata equally without
+    w = np.ones(cls.size) if classes else _stratum_weights(cs.strata)
+    ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
+                          for j in range(z_cal.shape[1])])  # fmt: skip
+    return mu, z_cal, cls
 
 
-def calibrate_and_report(ens: LineEnsemble, vs: ValidationSet, Y_val: np.ndarray,
-                         classes: SpreadClasses | None = None) -> dict:  # fmt: skip
-    """Calibrate ``ens`` on a validation set (:func:`calibrate`) and report its errors and
+def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
+                         classes: SpreadClasses | None = None,
+                         power: bool = True) -> dict:  # fmt: skip
+    """Calibrate ``ens`` on calibration lines (:func:`calibrate`) and report its errors and
     interval coverage there, overall, per stratum (corrupted, pristine) and per class."""
-    mu, z_cal, cls = calibrate(ens, vs, Y_val, classes)
+    mu, z_cal, cls = calibrate(ens, cs, Y_cal, classes, power)
+    z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
     pred = mu * ens.y_std + ens.y_mean
-    pred[:, 0] += vs.observed_mean
-    rel = np.exp(pred[:, 1:] - Y_val[:, 1:]) - 1.0
+    pred[:, 0] += cs.observed_mean
+    rel = np.exp(pred[:, 1:] - Y_cal[:, 1:]) - 1.0
 
     def named(values) -> dict:
         names = TARGETS if len(values) == len(TARGETS) else TARGETS[1:]
         return dict(zip(names, np.asarray(values).tolist(), strict=True))
 
     report = {
-        "val_rmse_F_mean_nN": float(np.sqrt(np.mean((pred[:, 0] - Y_val[:, 0]) ** 2))),
+        "n_calibration": len(cs.lines),
+        "val_rmse_F_mean_nN": float(np.sqrt(np.mean((pred[:, 0] - Y_cal[:, 0]) ** 2))),
         "val_rel_rmse": named(np.sqrt(np.mean(rel**2, axis=0))),
-        "val_coverage95": named(np.mean(z_cal <= Z95, axis=0)),
-        "val_coverage68": named(np.mean(z_cal <= Z68, axis=0)),
+        "val_coverage95": named(np.mean(z_cal <= z95, axis=0)),
+        "val_coverage68": named(np.mean(z_cal <= z68, axis=0)),
+        "interval_z68": named(z68),
     }
     if classes is None:
         report["calibration_scale"] = named(ens.scale)
+        report["calibration_exponent"] = named(ens.exponent)
     else:
         report["spread_classes"] = classes.to_dict()
         report["calibration_scale"] = [named(row) for row in ens.scale]
+        report["calibration_exponent"] = [named(row) for row in ens.exponent]
         report["val_per_class"] = [
             {"class": c, "n": int(np.sum(cls == c)),
-             "coverage95": named(np.mean(z_cal[cls == c] <= Z95, axis=0))}
+             "coverage95": named(np.mean(z_cal[cls == c] <= z95, axis=0))}
             for c in range(classes.n) if np.any(cls == c)
         ]  # fmt: skip
     for g, name in ((0, "corrupted"), (1, "pristine")):
-        m = vs.strata == g
+        m = cs.strata == g
         report[f"val_{name}"] = {
             "n": int(m.sum()),
             "rel_rmse": named(np.sqrt(np.mean(rel[m] ** 2, axis=0))),
-            "coverage95": named(np.mean(z_cal[m] <= Z95, axis=0)),
-            "coverage68": named(np.mean(z_cal[m] <= Z68, axis=0)),
+            "coverage95": named(np.mean(z_cal[m] <= z95, axis=0)),
+            "coverage68": named(np.mean(z_cal[m] <= z68, axis=0)),
         }
     return report
+
+
+def calibrate_on_validation(ens: LineEnsemble, vs: ValidationSet, Y: np.ndarray,
+                            force_nN: np.ndarray, x_nm: np.ndarray,
+                            params: dict[str, np.ndarray],
+                            config: LineTrainConfig) -> dict:  # fmt: skip
+    """:func:`calibrate_and_report` on the calibration lines of a run's validation
+    trajectories (:func:`calibration_set`; ``vs`` and ``Y`` from :func:`held_out`)."""
+    cs = calibration_set(force_nN, x_nm, params, vs.rows[vs.strata == 0], config, ens.spec)
+    return calibrate_and_report(ens, cs, Y[cs.rows], config.spread_classes, config.spread_power)
 
 
 def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.ndarray,
                               params: dict[str, np.ndarray],
                               config: LineTrainConfig) -> dict:  # fmt: skip
     """Re-fit the spread calibration of an ensemble that :func:`train_line_ensemble` trained
-    on these traces with this ``config``, on the same validation lines (the members are
-    left as they are); returns the report of :func:`calibrate_and_report`."""
+    on these traces with this ``config`` (the calibration settings, ``CALIBRATION_FIELDS``,
+    may differ), on the same validation trajectories (the members are left as they
+    are); returns the report of :func:`calibrate_and_report`."""
     _, vs, Y = held_out(force_nN, x_nm, params, config, ens.spec,
                         np.random.default_rng(config.seed))  # fmt: skip
-    return calibrate_and_report(ens, vs, Y[vs.rows], config.spread_classes)
+    return calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config)
 
 
 def train_line_ensemble(
@@ -422,7 +532,7 @@ def train_line_ensemble(
             bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
         ens.members.append(net)
     report = {
-        **calibrate_and_report(ens, vs, Y[vs.rows], config.spread_classes),
+        **calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config),
         "history": history,
         "train_seconds": time.perf_counter() - t0,
         "n_train": int(train.size),
