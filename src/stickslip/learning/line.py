@@ -39,12 +39,12 @@ from __future__ import annotations
 
 import copy
 from dataclasses import asdict, dataclass, field
-from statistics import NormalDist
 
 import numpy as np
 import torch
 from torch import nn
 
+from stickslip.evaluation.calibration import gaussian_z
 from stickslip.learning.features import resample_mean
 from stickslip.learning.inference import predict_windows
 from stickslip.learning.modelfile import TrainedModel
@@ -277,7 +277,7 @@ class LineEnsemble:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
         (n_targets,): interpolated in ``shape``, or the Gaussian quantile without it."""
         if self.shape is None:
-            return np.full(len(TARGETS), NormalDist().inv_cdf(0.5 + level / 2))
+            return np.full(len(TARGETS), gaussian_z(level))
         return np.array([np.interp(level, SHAPE_LEVELS, q) for q in self.shape])
 
     def line_classes(self, X: torch.Tensor, C: torch.Tensor) -> np.ndarray:

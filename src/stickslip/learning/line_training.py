@@ -366,9 +366,10 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
         n_classes = classes.n
     scale, exponent = class_fit(err, sd, cls, n_classes, cs.strata, power)
     z_cal = err / (scale[cls] * sd ** exponent[cls])
-    ens.scale, ens.exponent = (scale, exponent) if classes else (scale[0], exponent[0])
+    per_class = classes is not None
+    ens.scale, ens.exponent = (scale, exponent) if per_class else (scale[0], exponent[0])
     # weighed as in the fit: lines equally within classes, strata equally without
-    w = np.ones(cls.size) if classes else _stratum_weights(cs.strata)
+    w = np.ones(cls.size) if per_class else _stratum_weights(cs.strata)
     ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
                           for j in range(z_cal.shape[1])])  # fmt: skip
     return mu, z_cal, cls
