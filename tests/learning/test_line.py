@@ -33,6 +33,7 @@ from stickslip.learning.line_training import (
     power_fit,
     train_line_ensemble,
     training_effects,
+    validation_set,
 )
 from stickslip.learning.modelfile import ModelFileError, load_model
 from stickslip.simulation import PhysicalSettings, simulate
@@ -376,9 +377,12 @@ def test_calibration_set_draws_the_effects_afresh_on_the_validation_lines():
               "velocity_nm_per_s": np.full(n, 60.0), "mod_amplitude": np.full(n, 0.1)}  # fmt: skip
     cfg = LineTrainConfig(calibration_draws=3, clean_fraction=0.0)
     val = np.arange(10)
-    cs = calibration_set(force, x, params, val, cfg, LineSpec())
+    first = validation_set(force, x, params, val, cfg, LineSpec())
+    cs = calibration_set(first, force, x, params, cfg, LineSpec())
     assert len(cs.lines) == 30 and list(cs.rows) == list(val) * 3
-    again = calibration_set(force, x, params, val, cfg, LineSpec()).lines
+    assert all(a is b for a, b in zip(cs.lines[:10], first.lines, strict=True))  # reused
+    again = calibration_set(validation_set(force, x, params, val, cfg, LineSpec()), force, x,
+                            params, cfg, LineSpec()).lines  # fmt: skip
     assert all(np.array_equal(a, b) for a, b in zip(cs.lines, again, strict=True))  # seeded
     # each draw corrupts the same clean line differently
     assert not np.allclose(cs.lines[0], cs.lines[10]) and not np.allclose(cs.lines[10],

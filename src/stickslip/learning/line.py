@@ -51,7 +51,7 @@ from stickslip.learning.modelfile import TrainedModel
 from stickslip.units import eta_from
 
 TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
-Z68, Z95 = 0.994458, 1.959964  # two-sided 68 % and 95 % Gaussian quantiles
+Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)  # two-sided 68 % and 95 % Gaussian quantiles
 #: Levels at which a calibrated ensemble stores its standardised errors' quantiles.
 SHAPE_LEVELS = np.arange(1, 100) / 100.0
 INFER_CHUNK = 512

@@ -10,6 +10,10 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
     y_mean, y_std       target normalisation (training set)
     scale               calibration of the predictive spread: per target, or per class
                         of line and target
+    exponent            calibrated std = scale * raw std ** exponent, shaped as scale
+                        (absent: 1)
+    shape               quantiles of the calibrated |error| / std at SHAPE_LEVELS, per
+                        target (absent: Gaussian intervals)
     spread_classes      SpreadClasses as a dict (absent: one scale row for all lines)
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data

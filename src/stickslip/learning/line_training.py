@@ -257,14 +257,12 @@ class ValidationSet:
     """Held-out lines as the network sees them, in two strata.
 
     ``lines`` are the mapped lines, whole (calibration reads them as inference does),
-    ``X`` the same cropped to a common length (to follow the loss while training), ``C``
-    the conditioning, ``rows`` the source trajectories (the flat-substrate ones twice),
+    ``C`` the conditioning, ``rows`` the source trajectories (the flat-substrate ones twice),
     ``strata`` 0 for a corrupted line (drawn like training ones, same clean fraction)
     and 1 for a pristine one, ``observed_mean`` each input line's mean force.
     """
 
     lines: list[np.ndarray]
-    X: torch.Tensor
     C: torch.Tensor
     rows: np.ndarray
     strata: np.ndarray
@@ -283,10 +281,8 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     pristine, mean_p = corrupt_and_map(force_nN[val_p], a[val_p], x_nm, spec, config.effects,
                                        val_rng, keep_clean=np.ones(val_p.size, bool))  # fmt: skip
     rows = np.concatenate([val, val_p])
-    lines = corrupted + pristine
     return ValidationSet(
-        lines=lines,
-        X=line_inputs(lines, spec),
+        lines=corrupted + pristine,
         C=conditioning(a[rows], params["velocity_nm_per_s"][rows], spec),
         rows=rows,
         strata=np.repeat([0, 1], [val.size, val_p.size]),
@@ -294,20 +290,20 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     )
 
 
-def calibration_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
+def calibration_set(vs: ValidationSet, force_nN, x_nm, params, config: LineTrainConfig,
                     spec: LineSpec) -> ValidationSet:  # fmt: skip
     """The validation trajectories under ``config.calibration_draws`` independent draws of
-    the detector effects (the first is :func:`validation_set`'s), as one set."""
-    sets = [validation_set(force_nN, x_nm, params, val, config, spec, draw=k)
-            for k in range(max(1, config.calibration_draws))]  # fmt: skip
-    lines = [f for vs in sets for f in vs.lines]
+    the detector effects, as one set: ``vs`` (:func:`validation_set`'s first draw) and
+    the draws after it."""
+    val = vs.rows[vs.strata == 0]
+    sets = [vs] + [validation_set(force_nN, x_nm, params, val, config, spec, draw=k)
+                   for k in range(1, config.calibration_draws)]  # fmt: skip
     return ValidationSet(
-        lines=lines,
-        X=line_inputs(lines, spec),
-        C=torch.cat([vs.C for vs in sets]),
-        rows=np.concatenate([vs.rows for vs in sets]),
-        strata=np.concatenate([vs.strata for vs in sets]),
-        observed_mean=np.concatenate([vs.observed_mean for vs in sets]),
+        lines=[f for s in sets for f in s.lines],
+        C=torch.cat([s.C for s in sets]),
+        rows=np.concatenate([s.rows for s in sets]),
+        strata=np.concatenate([s.strata for s in sets]),
+        observed_mean=np.concatenate([s.observed_mean for s in sets]),
     )
 
 
@@ -427,7 +423,7 @@ def calibrate_on_validation(ens: LineEnsemble, vs: ValidationSet, Y: np.ndarray,
                             config: LineTrainConfig) -> dict:  # fmt: skip
     """:func:`calibrate_and_report` on the calibration lines of a run's validation
     trajectories (:func:`calibration_set`; ``vs`` and ``Y`` from :func:`held_out`)."""
-    cs = calibration_set(force_nN, x_nm, params, vs.rows[vs.strata == 0], config, ens.spec)
+    cs = calibration_set(vs, force_nN, x_nm, params, config, ens.spec)
     return calibrate_and_report(ens, cs, Y[cs.rows], config.spread_classes, config.spread_power)
 
 
@@ -481,7 +477,8 @@ def train_line_ensemble(
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
     ens = LineEnsemble(members=[], spec=spec, y_mean=y_mean, y_std=y_std, expert=expert)
-    Xv, Cv, Ev = vs.X, vs.C, ens.expert_for(vs.X)
+    Xv = line_inputs(vs.lines, spec)  # cropped to a common length, to follow the loss
+    Cv, Ev = vs.C, ens.expert_for(Xv)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
     history = []
     steps_per_epoch = max(1, train.size // config.batch_size)
