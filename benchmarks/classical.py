@@ -16,12 +16,12 @@ import time
 
 import numpy as np
 
-from stickslip.estimation import estimate_array
-from stickslip.estimation import estimator as E
-from stickslip.evaluation.bench import in_eta_window
-from stickslip.evaluation.plots_classical import parity_plot
-from stickslip.simulation.config import PhysicalSettings
-from stickslip.simulation.simulate import simulate
+from stickslip.diagnostics.plots_classical import parity_plot
+from stickslip.estimators.classical import estimate_array
+from stickslip.estimators.classical import estimator as E
+from stickslip.simulators.bench import in_eta_window
+from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.simulate import simulate
 from stickslip.units import eta_from
 
 

@@ -31,14 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import Dataset, load_dataset
-from stickslip.evaluation.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
-from stickslip.evaluation.calibration import coverage
-from stickslip.learning.line import predict_raw_lines
-from stickslip.learning.line_model import load_line_model
-from stickslip.learning.line_training import TRAIN_EFFECTS
-from stickslip.simulation.instrument import LAB, apply_instrument
-from stickslip.simulation.randomised import cached_randomised_set, lab_config
+from stickslip.diagnostics.calibration import coverage
+from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.modelfile import load_line_model
+from stickslip.estimators.line.training import TRAIN_EFFECTS
+from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
+from stickslip.simulators.instrument import LAB, apply_instrument
+from stickslip.simulators.randomised import cached_randomised_set, lab_config
+from stickslip.traces.dataset import Dataset, load_dataset
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
 from lab_bench import randomised_heldout  # noqa: E402

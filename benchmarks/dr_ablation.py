@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.bench import BenchConfig, bench_if_missing, in_eta_window
-from stickslip.learning.line import predict_raw_lines
-from stickslip.learning.line_training import TRAIN_EFFECTS, LineTrainConfig, train_line_ensemble
-from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.training import TRAIN_EFFECTS, LineTrainConfig, train_line_ensemble
+from stickslip.simulators.bench import BenchConfig, bench_if_missing, in_eta_window
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.traces.dataset import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 EFFECTS = ("white_nN", "pink_nN", "lowpass_px", "drift_nN", "softening")

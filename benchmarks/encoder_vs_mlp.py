@@ -7,7 +7,7 @@ benchmark trains the MLPs (raw and pi recipes, the paper's network and optimiser
 instead: the domain-randomised set mapped onto the reference lattice, labels in the
 reference frame, corrupted with the line model's detector effects (20 % left clean),
 several independent corruption replicas per trajectory
-(stickslip.learning.randomised_windows). Replicas of a trajectory stay on one side of
+(stickslip.estimators.window.randomised). Replicas of a trajectory stay on one side of
 the train/validation split.
 
 All estimators are scored as in lab_bench.py on its clean held-out set (300 paper-preset
@@ -31,18 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import concat_datasets, load_dataset
-from stickslip.data.trace import Trace
-from stickslip.evaluation.bench import BenchConfig, bench_if_missing, in_eta_window
-from stickslip.learning.inference import predict_traces
-from stickslip.learning.modelfile import load_model, save_model
-from stickslip.learning.randomised_windows import (
+from stickslip.estimators.window.inference import predict_traces
+from stickslip.estimators.window.modelfile import load_model, save_model
+from stickslip.estimators.window.randomised import (
     randomised_window_set,
     split_by_group,
 )
-from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import CLEAN_TEST_SEED, sweep_if_missing
-from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.jobs.workflow import CLEAN_TEST_SEED, sweep_if_missing
+from stickslip.simulators.bench import BenchConfig, bench_if_missing, in_eta_window
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.traces.dataset import concat_datasets, load_dataset
+from stickslip.traces.trace import Trace
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
 from lab_bench import groups, predictions, score  # noqa: E402
@@ -92,7 +92,7 @@ def main() -> None:
                f"python {platform.python_version()}")  # fmt: skip
     print(f"machine: {machine}")
 
-    from stickslip.learning.line_model import load_line_model
+    from stickslip.estimators.line.modelfile import load_line_model
 
     source = concat_datasets([
         cached_randomised_set(RandomisedConfig(n=args.n, seed=s), ROOT / "build" / "line-train")

@@ -1,8 +1,8 @@
 """Inference throughput of the bundled models: traces per second, 512-pixel traces, batched.
 
-Window model: :func:`stickslip.learning.inference.predict_array` (features + one
+Window model: :func:`stickslip.estimators.window.inference.predict_array` (features + one
 batched forward pass + per-trace means). Line model (``--line``): the bundled CNN
-ensemble with uncertainty, :func:`stickslip.learning.line.predict_raw_lines` (mapping,
+ensemble with uncertainty, :func:`stickslip.estimators.line.ensemble.predict_raw_lines` (mapping,
 all members, predictive mean, std and intervals), at the reference lattice and at
 a = 0.316 nm. Run it on a quiet machine.
 
@@ -17,8 +17,8 @@ import time
 import numpy as np
 import torch
 
-from stickslip.learning.inference import predict_array
-from stickslip.learning.modelfile import load_model
+from stickslip.estimators.window.inference import predict_array
+from stickslip.estimators.window.modelfile import load_model
 
 
 def main() -> None:
@@ -52,8 +52,8 @@ def main() -> None:
 
 
 def line_speed(args, x: np.ndarray, force: np.ndarray) -> None:
-    from stickslip.learning.line import predict_raw_lines
-    from stickslip.learning.line_model import load_line_model
+    from stickslip.estimators.line.ensemble import predict_raw_lines
+    from stickslip.estimators.line.modelfile import load_line_model
 
     ens = load_line_model(args.model)
     n = force.shape[0]

@@ -29,24 +29,24 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import Dataset, load_dataset
-from stickslip.data.trace import Trace
-from stickslip.estimation import estimate_array
-from stickslip.estimation import estimator as E
-from stickslip.estimation.baseline import five_line_estimate
-from stickslip.evaluation.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
-from stickslip.evaluation.calibration import coverage, reliability, reliability_plot
-from stickslip.learning.inference import predict_traces
-from stickslip.learning.line import predict_raw_lines
-from stickslip.learning.line_training import LineTrainConfig
-from stickslip.learning.workflow import (
+from stickslip.diagnostics.calibration import coverage, reliability, reliability_plot
+from stickslip.estimators.classical import estimate_array
+from stickslip.estimators.classical import estimator as E
+from stickslip.estimators.classical.baseline import five_line_estimate
+from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.training import LineTrainConfig
+from stickslip.estimators.window.inference import predict_traces
+from stickslip.jobs.workflow import (
     CLEAN_TEST_SEED,
     LAB_MLP_SEED,
     clean_window_model,
     sweep_if_missing,
 )
-from stickslip.simulation.instrument import EffectsMixture, InstrumentEffects, apply_instrument
-from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.simulators.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
+from stickslip.simulators.instrument import EffectsMixture, InstrumentEffects, apply_instrument
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.traces.dataset import Dataset, load_dataset
+from stickslip.traces.trace import Trace
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
@@ -132,7 +132,7 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}")  # fmt: skip
 
-    from stickslip.learning.line_model import load_line_model
+    from stickslip.estimators.line.modelfile import load_line_model
 
     line_model = load_line_model(args.line_model)
     mlps = {f"MLP {r}": window_model(args.work, r, args.epochs) for r in ("raw", "pi")}

@@ -2,7 +2,7 @@
 
 The model (default: the bundled one, trained at a = 0.246 nm, v = 60 nm/s, 296 K) reads
 traces simulated at a = 0.316 nm and v = 30 nm/s (MoS2 in the reference paper's
-experiments) through the lattice mapping of :mod:`stickslip.learning.inference`. Two
+experiments) through the lattice mapping of :mod:`stickslip.estimators.window.inference`. Two
 controls separate the causes: a = 0.316 nm at the training velocity (lattice mapping
 alone) and a = 0.246 nm at 30 nm/s (velocity alone, no mapping). "unmapped" reads the
 MoS2 traces as if they were graphene (no mapping) for comparison.
@@ -15,11 +15,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.report import evaluate_model
-from stickslip.learning.modelfile import load_model
-from stickslip.learning.workflow import sweep_if_missing
-from stickslip.simulation import PhysicalSettings
+from stickslip.estimators.window.modelfile import load_model
+from stickslip.jobs.report import evaluate_model
+from stickslip.jobs.workflow import sweep_if_missing
+from stickslip.simulators import PhysicalSettings
+from stickslip.traces.dataset import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = [

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.report import evaluate_model
-from stickslip.learning.modelfile import load_model
-from stickslip.learning.workflow import sweep_if_missing
+from stickslip.estimators.window.modelfile import load_model
+from stickslip.jobs.report import evaluate_model
+from stickslip.jobs.workflow import sweep_if_missing
+from stickslip.traces.dataset import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,11 +16,11 @@ import argparse
 import json
 from pathlib import Path
 
-from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.metrics import PAPER_MD_MD_RMSE, TARGET_RMSE
-from stickslip.evaluation.report import evaluate_model, write_evaluation
-from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import sweep_if_missing
+from stickslip.diagnostics.metrics import PAPER_MD_MD_RMSE, TARGET_RMSE
+from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.jobs.report import evaluate_model, write_evaluation
+from stickslip.jobs.workflow import sweep_if_missing
+from stickslip.traces.dataset import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 WINDOW, STRIDE, TRAIN_STRIDE = 64, 64, 16

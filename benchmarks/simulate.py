@@ -40,9 +40,9 @@ def main() -> None:
     if args.threads:
         numba.set_num_threads(args.threads)
 
-    from stickslip.simulation import PhysicalSettings, SweepConfig, run_sweep, simulate
-    from stickslip.simulation.config import warmup_nm_for
-    from stickslip.simulation.sweep import sweep_table
+    from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
+    from stickslip.simulators.config import warmup_nm_for
+    from stickslip.simulators.sweep import sweep_table
 
     print(f"machine: {machine()}")
     t0 = time.perf_counter()

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.atomic import write_text_atomic
-from stickslip.data.trace import write_trace_csv
-from stickslip.simulation import PRESETS, simulate
+from stickslip.atomic import write_text_atomic
+from stickslip.simulators import PRESETS, simulate
+from stickslip.traces.trace import write_trace_csv
 from stickslip.units import eta_from
 
 OUT = Path(__file__).resolve().parents[1] / "src" / "stickslip" / "resources" / "examples"

@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import load_dataset
-from stickslip.evaluation.plots import loss_curve
-from stickslip.evaluation.report import evaluate_model, write_evaluation
-from stickslip.learning.modelfile import DEFAULT_MODEL_NAME, save_model
-from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.learning.workflow import PAPER_HELDOUT_SEED, PAPER_TRAIN_SEED, sweep_if_missing
+from stickslip.diagnostics.plots import loss_curve
+from stickslip.estimators.window.modelfile import DEFAULT_MODEL_NAME, save_model
+from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
+from stickslip.jobs.report import evaluate_model, write_evaluation
+from stickslip.jobs.workflow import PAPER_HELDOUT_SEED, PAPER_TRAIN_SEED, sweep_if_missing
+from stickslip.traces.dataset import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 RESOURCES = ROOT / "src" / "stickslip" / "resources"

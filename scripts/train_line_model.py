@@ -1,6 +1,6 @@
 """Train the bundled whole-line model (CNN ensemble with uncertainty), reproducibly.
 
-1. Simulates domain-randomised training sets, one per seed (stickslip.simulation.randomised:
+1. Simulates domain-randomised training sets, one per seed (stickslip.simulators.randomised:
    lattices 0.235-0.335 nm with 30 % exactly on graphite's, 30-90 nm/s, modulated and
    defective substrates), cached under --work (a cached file is reused only if its
    stored config is the one asked for); --typical trajectories on a typical careful
@@ -13,7 +13,7 @@
    held-out split. The effects' prior (line_training.training_effects) gives a
    --typical-fraction of lines a typical careful measurement's effects (instrument.LAB)
    and the rest the broad ranges (line_training.TRAIN_EFFECTS). The members read an
-   expert input and learn when to trust it (stickslip.learning.line): by default the
+   expert input and learn when to trust it (stickslip.estimators.line.ensemble): by default the
    paper's pi MLP trained on clean paper-preset simulations (the bundled window model's
    data and recipe, without its noise augmentation: the most precise expert on a clean
    line, and plainly wrong on a noisy one), trained here and cached; --expert bundled
@@ -39,9 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from stickslip.data.dataset import Dataset, concat_datasets, load_dataset
-from stickslip.learning.line_model import line_metadata, load_line_model, save_line_model
-from stickslip.learning.line_training import (
+from stickslip.estimators.line.modelfile import line_metadata, load_line_model, save_line_model
+from stickslip.estimators.line.training import (
     CALIBRATION_FIELDS,
     TYPICAL_FRACTION,
     LineTrainConfig,
@@ -49,14 +48,15 @@ from stickslip.learning.line_training import (
     train_line_ensemble,
     training_effects,
 )
-from stickslip.learning.modelfile import TrainedModel, load_model
-from stickslip.learning.workflow import (
+from stickslip.estimators.window.modelfile import TrainedModel, load_model
+from stickslip.jobs.workflow import (
     PAPER_TRAIN_SEED,
     RESERVED_SEEDS,
     clean_window_model,
     sweep_if_missing,
 )
-from stickslip.simulation.randomised import RandomisedConfig, cached_randomised_set, lab_config
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
+from stickslip.traces.dataset import Dataset, concat_datasets, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERT_SEED, EXPERT_N = PAPER_TRAIN_SEED, 1600  # the bundled window model's training data

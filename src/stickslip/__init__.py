@@ -2,9 +2,9 @@
 
 Subpackages follow the pipeline:
 
-- :mod:`stickslip.simulation` -- finite-temperature PT simulator and datasets,
-- :mod:`stickslip.data` -- trace formats and I/O,
-- :mod:`stickslip.estimation` -- classical (slip-detection) estimator,
+- :mod:`stickslip.simulators` -- finite-temperature PT simulator and datasets,
+- :mod:`stickslip.traces` -- trace formats and I/O,
+- :mod:`stickslip.estimators.classical` -- classical (slip-detection) estimator,
 - :mod:`stickslip.learning` -- features, networks, training and inference,
 - :mod:`stickslip.evaluation` -- metrics, plots and reports,
 - :mod:`stickslip.cli` -- the ``stickslip`` command.

@@ -9,10 +9,10 @@ import pytest
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
-from stickslip.data.trace import write_trace_csv
-from stickslip.evaluation.labels_report import COLUMNS, STD_COLUMNS
-from stickslip.simulation.config import PhysicalSettings
-from stickslip.simulation.simulate import simulate
+from stickslip.jobs.labels_report import COLUMNS, STD_COLUMNS
+from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.simulate import simulate
+from stickslip.traces.trace import write_trace_csv
 
 runner = CliRunner()
 

@@ -10,8 +10,8 @@ import torch
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
-from stickslip.data.trace import write_trace_csv
-from stickslip.simulation import PRESETS, SweepConfig, run_sweep, simulate
+from stickslip.simulators import PRESETS, SweepConfig, run_sweep, simulate
+from stickslip.traces.trace import write_trace_csv
 
 
 def _run(args):

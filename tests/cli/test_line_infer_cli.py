@@ -8,10 +8,10 @@ import torch
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
-from stickslip.data import write_trace_csv
-from stickslip.learning.line import LineCNN, LineEnsemble, LineSpec
-from stickslip.learning.line_model import save_line_model
-from stickslip.simulation import simulate
+from stickslip.estimators.line.ensemble import LineCNN, LineEnsemble, LineSpec
+from stickslip.estimators.line.modelfile import save_line_model
+from stickslip.simulators import simulate
+from stickslip.traces import write_trace_csv
 
 runner = CliRunner()
 

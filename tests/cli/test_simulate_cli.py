@@ -5,8 +5,8 @@ import pytest
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
-from stickslip.data import read_trace_csv
-from stickslip.data.dataset import load_dataset
+from stickslip.traces import read_trace_csv
+from stickslip.traces.dataset import load_dataset
 
 runner = CliRunner()
 FAST = ["--velocity", "600", "--length", "1", "--pixels", "32"]

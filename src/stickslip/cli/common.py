@@ -40,7 +40,7 @@ LOADS_HELP = "Comma-separated loads/setpoints of the line groups (with --lines-p
 
 def parse_loads_arg(text: str | None) -> list[float] | None:
     """``--loads`` as a list of floats, or a usage error."""
-    from stickslip.data.formats.maps import parse_loads
+    from stickslip.traces.formats.maps import parse_loads
 
     try:
         return parse_loads(text)
@@ -55,8 +55,8 @@ def reading_options(
     scan_size_nm: float | None = None,
     load_unit: str = "nN",
 ) -> dict[str, Any]:
-    """Reader ``**options`` for :func:`stickslip.data.collect_traces`, or a usage error."""
-    from stickslip.data.formats.maps import reader_options
+    """Reader ``**options`` for :func:`stickslip.traces.collect_traces`, or a usage error."""
+    from stickslip.traces.formats.maps import reader_options
 
     try:
         return reader_options(

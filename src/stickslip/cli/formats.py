@@ -9,6 +9,7 @@ from typing import Any
 
 import typer
 
+from stickslip.atomic import write_text_atomic
 from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
@@ -21,12 +22,11 @@ from stickslip.cli.common import (
     usage_error,
 )
 from stickslip.cli.main import app
-from stickslip.data.atomic import write_text_atomic
-from stickslip.data.formats.common import ScanFile
-from stickslip.data.formats.loadplot import plot_versus_load
-from stickslip.data.formats.maps import TRACE, summarise_by_load
-from stickslip.data.readers import is_scan_file, read_file, read_scan
-from stickslip.data.trace import Trace, TraceReadError, expand_paths
+from stickslip.diagnostics.plots_load import plot_versus_load
+from stickslip.traces.formats.common import ScanFile
+from stickslip.traces.formats.maps import TRACE, summarise_by_load
+from stickslip.traces.readers import expand_paths, is_scan_file, read_file, read_scan
+from stickslip.traces.trace import Trace, TraceReadError
 
 
 def _fmt(v: Any, unit: str = "") -> str:

@@ -56,10 +56,10 @@ def label(
     if out.is_dir():
         usage_error(f"--out {out} is a directory")
 
-    from stickslip.data.trace import collect_traces
-    from stickslip.estimation import analyse_trace, estimate_traces
-    from stickslip.evaluation.labels_report import write_labels_csv
-    from stickslip.evaluation.loads import write_load_report
+    from stickslip.diagnostics.loads import write_load_report
+    from stickslip.estimators.classical import analyse_trace, estimate_traces
+    from stickslip.jobs.labels_report import write_labels_csv
+    from stickslip.traces.readers import collect_traces
 
     opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
     found, errors = collect_traces(traces, **opts)
@@ -77,7 +77,7 @@ def label(
     if by_load:
         info(f"wrote {by_load[0]} and {by_load[1]} (per load group)")
     if plots is not None:
-        from stickslip.evaluation.plots_classical import plot_trace_diagnostics
+        from stickslip.diagnostics.plots_classical import plot_trace_diagnostics
 
         for tr, est in zip(found, estimates, strict=True):
             plot_trace_diagnostics(

@@ -24,8 +24,8 @@ MODEL_HELP = "Model file from 'stickslip train' (default: the bundled model)."
 
 
 def _load_model(path: Path | None, any_kind: bool = False):
-    from stickslip.learning.line_model import load_any_model
-    from stickslip.learning.modelfile import ModelFileError, load_model
+    from stickslip.estimators.line.modelfile import load_any_model
+    from stickslip.estimators.window.modelfile import ModelFileError, load_model
 
     try:
         return load_any_model(path) if any_kind else load_model(path)
@@ -34,7 +34,7 @@ def _load_model(path: Path | None, any_kind: bool = False):
 
 
 def _load_data(path: Path):
-    from stickslip.data.dataset import DatasetError, load_dataset
+    from stickslip.traces.dataset import DatasetError, load_dataset
 
     try:
         return load_dataset(path)
@@ -67,10 +67,10 @@ def train_cmd(
     Writes the model file, a loss-curve plot beside it (<out>.loss.png) and prints the
     validation metrics (per-trajectory, mean over windows).
     """
-    from stickslip.evaluation.plots import loss_curve
-    from stickslip.learning.features import FeatureError
-    from stickslip.learning.training import TrainConfig, spec_for_dataset, train_model
-    from stickslip.learning.workflow import validate_and_save
+    from stickslip.diagnostics.plots import loss_curve
+    from stickslip.estimators.window.features import FeatureError
+    from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
+    from stickslip.jobs.workflow import validate_and_save
 
     if features not in ("raw", "pi"):
         usage_error(f"--features must be raw or pi (got '{features}')")
@@ -123,7 +123,7 @@ def infer_cmd(
     estimator's values are beside them (classical_*). Unreadable or too-short traces
     are reported one line each; the others are processed (exit code 1).
     """
-    from stickslip.learning.workflow import infer_job
+    from stickslip.jobs.workflow import infer_job
 
     for name, v in (("--lattice", lattice), ("--velocity", velocity)):
         if v is not None and not v > 0:
@@ -147,7 +147,7 @@ def evaluate_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
 ) -> None:
     """RMSE and relative errors per target, parity plots, metrics as JSON and CSV."""
-    from stickslip.evaluation.report import evaluate_model, write_evaluation
+    from stickslip.jobs.report import evaluate_model, write_evaluation
 
     m = _load_model(model)
     ds = _load_data(data)
@@ -163,7 +163,7 @@ def demo_cmd(
     out: Path = typer.Option(Path("stickslip-demo"), "--out", "-o", help="Output folder."),
 ) -> None:
     """Run 'infer' with the bundled model on the bundled example traces."""
-    from stickslip.learning.workflow import demo_job
+    from stickslip.jobs.workflow import demo_job
 
     failed = demo_job(out, echo=typer.echo, warn=error, note=info)
     raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from stickslip import __version__
+from stickslip._version import __version__
 
 app = typer.Typer(
     name="stickslip",

@@ -9,8 +9,8 @@ import typer
 
 from stickslip.cli.common import error, info, usage_error
 from stickslip.cli.main import app
-from stickslip.data.dataset import DatasetError
-from stickslip.data.trace import write_trace_csv
+from stickslip.traces.dataset import DatasetError
+from stickslip.traces.trace import write_trace_csv
 
 
 def _range(text: str | None, name: str) -> tuple[float, float] | None:
@@ -66,7 +66,7 @@ def simulate_cmd(
     --n trajectories over the training range (Latin hypercube in U0 and K, eta window
     enforced), written as chunked HDF5.
     """
-    from stickslip.simulation import (
+    from stickslip.simulators import (
         PRESETS,
         ParameterRange,
         SettingsError,
@@ -123,7 +123,7 @@ def simulate_cmd(
 
 def _write_fine(out: Path, res) -> None:
     """Diagnostics beside the trace: instantaneous support, tip position and force."""
-    from stickslip.data.atomic import atomic_path
+    from stickslip.atomic import atomic_path
 
     fine_path = out.with_name(out.stem + ".fine.csv")
     data = np.column_stack([res.fine_support_nm[0], res.fine_x_nm[0], res.fine_force_nN[0]])

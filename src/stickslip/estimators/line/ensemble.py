@@ -1,0 +1,481 @@
+"""Whole-line models: a 1D CNN over the mapped trace with Gaussian heads, and ensembles.
+
+Where the paper's MLP reads windows of a trace, these models read the whole line.
+
+Input. A trace on lattice ``a`` is mapped onto the reference lattice ``a0`` exactly as
+for the window models (:mod:`stickslip.estimators.window.inference`): positions divided by
+``s = a / a0``, forces unchanged, then resampled (pixel means) onto the reference pixel,
+so a lattice period always spans the same number of pixels. The network sees two
+channels, the force and its pixel-to-pixel difference, plus two conditioning scalars
+(``s - 1`` and ``ln(v / v0)``), so that thermal activation, which the mapping does not
+carry over, is learned rather than ignored. Any line of at least ``min_pixels`` works:
+global average and max pooling make the network length-agnostic.
+
+Output. For each target (``F_mean_nN`` as a correction to the trace's own mean, which
+is exact on a clean line but carries any offset drift; ``ln U0'``, ``ln K'``, ``ln eta``
+with ``U0 = U0' s`` and ``K = K' / s``) a mean and a log-variance in standardised units:
+trained with the Gaussian negative log-likelihood, each member reports how sure it is.
+An ensemble of members gives the predictive mean and variance (mean of the members'
+variances plus the variance of their means). Held-out simulations calibrate it, per
+target and per class of line (:class:`SpreadClasses`: quiet lines, as simulations are,
+need other factors than noisy ones): the calibrated spread is ``c * sd ** gamma``, a
+quantile regression of the 95 % error on the ensemble's own spread (``gamma = 1`` is a
+plain scale factor; ``gamma > 1`` where the networks are surer than they should be on
+hard lines and less sure than they could be on easy ones). The errors have heavier
+tails than a Gaussian's, so the intervals at other levels take the calibration lines'
+own distribution of standardised errors (:meth:`LineEnsemble.z_at`).
+
+Expert input (optional). The paper's window MLP, trained on clean simulations, is very
+precise on a clean line like its training ones and wrong on a corrupted one. A model
+with an ``expert`` reads that MLP's estimate of the line (:func:`expert_inputs`: the
+mean over its windows of U0', K' and the implied eta, with their spread over windows)
+beside the CNN features, and outputs, per target, a gate ``g`` in (0, 1) with the
+mean ``m + g (e - m)`` (``m`` the CNN's own estimate, ``e`` the expert's). The gate is
+learned on the randomised training lines, so the network decides from the line itself
+when the expert can be trusted; its spread head sees the expert too.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from stickslip.diagnostics.calibration import gaussian_z
+from stickslip.estimators.window.features import resample_mean
+from stickslip.estimators.window.inference import predict_windows
+from stickslip.estimators.window.modelfile import TrainedModel
+from stickslip.units import eta_from
+
+TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
+Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)  # two-sided 68 % and 95 % Gaussian quantiles
+#: Levels at which a calibrated ensemble stores its standardised errors' quantiles.
+SHAPE_LEVELS = np.arange(1, 100) / 100.0
+INFER_CHUNK = 512
+N_EXPERT = 5  # expert inputs: U0', K', eta estimates and the windows' spread of U0', K'
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    """How a trace becomes a line-model input (saved in the model file)."""
+
+    lattice_nm: float = 0.246
+    pixel_nm: float = 11.0 / 512
+    velocity_nm_per_s: float = 60.0
+    temperature_K: float = 296.0
+    force_scale_nN: float = 5.0
+    slope_scale_nN: float = 1.0
+    crop: int = 352
+    min_pixels: int = 64
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def map_line(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float, spec: LineSpec):
+    """Mapped, resampled line on the reference lattice and pixel (1-D array)."""
+    s = float(lattice_nm) / spec.lattice_nm
+    x = np.asarray(x_nm, float) / s
+    f = np.asarray(force_nN, float)
+    step = np.diff(x)
+    if step.size and np.all(np.abs(step / spec.pixel_nm - 1.0) < 1e-3):
+        return f  # already on the reference pixel: nothing to resample
+    return resample_mean(x, f, spec.pixel_nm)
+
+
+def line_inputs(lines: list[np.ndarray], spec: LineSpec, length: int | None = None,
+                rng: np.random.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    """Stack lines into a (B, 2, L) tensor: scaled force and scaled pixel difference.
+
+    ``length`` (default: the shortest line) is the window taken from each line: a random
+    crop when ``rng`` is given (training), else the centred one. Lines shorter than it
+    are padded by repeating them periodically (a stick-slip line is nearly periodic).
+    """
+    L = min(f.size for f in lines) if length is None else int(length)
+    X = np.empty((len(lines), 2, L), np.float32)
+    for i, f in enumerate(lines):
+        if f.size < L:
+            f = np.resize(f, L)
+        start = (f.size - L) // 2 if rng is None else int(rng.integers(0, f.size - L + 1))
+        w = f[start : start + L]
+        X[i, 0] = w / spec.force_scale_nN
+        X[i, 1, 0] = 0.0
+        X[i, 1, 1:] = np.diff(w) / spec.slope_scale_nN
+    return torch.from_numpy(X)
+
+
+def input_force_nN(X: torch.Tensor, spec: LineSpec) -> np.ndarray:
+    """The force channel of stacked inputs (:func:`line_inputs`) back in nN, (B, L)."""
+    return X[:, 0].numpy().astype(np.float64) * spec.force_scale_nN
+
+
+def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
+    """Conditioning scalars (B, 2): lattice ratio - 1 and ln of the velocity ratio."""
+    s = np.asarray(lattice_nm, float) / spec.lattice_nm - 1.0
+    lv = np.log(np.asarray(velocity_nm_per_s, float) / spec.velocity_nm_per_s)
+    return torch.from_numpy(np.column_stack(np.broadcast_arrays(s, lv)).astype(np.float32))
+
+
+class LineCNN(nn.Module):
+    """Strided 1D CNN, global mean+max pooling, conditioning, Gaussian heads; with
+    ``n_expert`` > 0, expert inputs and a gate per target (see the module notes).
+
+    ``spread_hidden`` > 0 gives the log-variances a head of their own (one hidden layer
+    of that width) instead of rows of the means' head: the spread then spans its own
+    range of scales (a pristine line's variance is ~1e3 times below a noisy one's)
+    without sharing a hidden layer shaped for the means.
+    """
+
+    def __init__(self, channels=(16, 32, 48, 64), n_cond: int = 2, n_targets: int = 4,
+                 hidden: int = 128, n_expert: int = 0, spread_hidden: int = 0):  # fmt: skip
+        super().__init__()
+        layers: list[nn.Module] = []
+        cin = 2
+        for i, c in enumerate(channels):
+            k = 7 if i == 0 else 5
+            layers += [nn.Conv1d(cin, c, k, stride=2, padding=k // 2), nn.BatchNorm1d(c),
+                       nn.ReLU()]  # fmt: skip
+            cin = c
+        self.body = nn.Sequential(*layers)
+        n_in = 2 * cin + n_cond + n_expert
+        # output rows: means, [log-variances], [gates]
+        n_out = (1 + (spread_hidden == 0) + (n_expert > 0)) * n_targets
+        self.head = nn.Sequential(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, n_out))
+        self.spread = None
+        if spread_hidden:
+            self.spread = nn.Sequential(nn.Linear(n_in, spread_hidden), nn.ReLU(),
+                                        nn.Linear(spread_hidden, n_targets))  # fmt: skip
+        self.n_targets = n_targets
+        self.n_expert = n_expert
+        self.spread_hidden = spread_hidden
+
+    def fused(self) -> LineCNN:
+        """An inference copy with each batch norm folded into its convolution."""
+        out = copy.deepcopy(self).eval()
+        layers, body = list(out.body), []
+        i = 0
+        while i < len(layers):
+            conv = layers[i]
+            if isinstance(conv, nn.Conv1d) and isinstance(layers[i + 1], nn.BatchNorm1d):
+                bn = layers[i + 1]
+                g = bn.weight / torch.sqrt(bn.running_var + bn.eps)
+                conv.weight.data = (conv.weight * g[:, None, None]).detach()
+                conv.bias.data = ((conv.bias - bn.running_mean) * g + bn.bias).detach()
+                i += 1
+            body.append(conv)
+            i += 1
+        out.body = nn.Sequential(*body)
+        return out
+
+    def forward(
+        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-variance (B, n_targets) in standardised units."""
+        mean, log_var, _ = self.parts(x, cond, expert)
+        return mean, log_var
+
+    def parts(
+        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, log-variance and the CNN's own (ungated) mean: training fits the own mean
+        too, so that it stays an estimate of the targets rather than a correction that
+        only makes sense mixed with the expert's."""
+        h = self.body(x)
+        parts = [h.mean(-1), h.amax(-1), cond]
+        if self.n_expert:
+            if expert is None:
+                raise ValueError("this network reads expert inputs: pass expert=")
+            parts.append(expert)
+        features = torch.cat(parts, dim=1)
+        out = self.head(features)
+        t = self.n_targets
+        own = out[:, :t]
+        if self.spread is None:
+            log_var, gate_rows = out[:, t : 2 * t], out[:, 2 * t :]
+        else:
+            log_var, gate_rows = self.spread(features), out[:, t:]
+        mean = own
+        if self.n_expert:
+            # the expert estimates the last targets (U0', K', eta), not the friction
+            e = torch.cat([own[:, : t - 3], expert[:, :3]], dim=1)
+            mean = own + torch.sigmoid(gate_rows) * (e - own)
+        return mean, log_var.clamp(-12.0, 6.0), own
+
+
+def expert_inputs(expert: TrainedModel, X: torch.Tensor, spec: LineSpec,
+                  y_mean: np.ndarray, y_std: np.ndarray) -> torch.Tensor:  # fmt: skip
+    """Expert inputs (B, :data:`N_EXPERT`) of stacked lines (:func:`line_inputs`).
+
+    The window model reads the force channel of ``X`` (the line the CNN reads, on the
+    reference lattice and pixel); its per-line estimate is the mean over windows (as
+    in the paper). Returned: ln U0', ln K' and ln eta of that estimate in the line
+    model's standardised target units (clipped to +-5 so that nonsense far outside the
+    expert's training range stays bounded), then ln of the windows' standard deviation
+    of ln U0' and ln K'.
+    """
+    est = predict_windows(expert, input_force_nN(X, spec))  # (B, W, targets), physical
+    U0 = np.clip(est[..., expert.targets.index("U0_eV")], 1e-3, None)
+    K = np.clip(est[..., expert.targets.index("K_N_m")], 1e-2, None)
+    lu, lk = np.log(U0.mean(axis=1)), np.log(K.mean(axis=1))
+    le = np.log(eta_from(np.exp(lu), np.exp(lk), spec.lattice_nm))
+    e = (np.column_stack([lu, lk, le]) - y_mean[-3:]) / y_std[-3:]
+    spread = np.log(np.column_stack([np.log(U0).std(axis=1), np.log(K).std(axis=1)]) + 1e-3)
+    return torch.from_numpy(np.column_stack([np.clip(e, -5.0, 5.0), spread]).astype(np.float32))
+
+
+def gaussian_nll(
+    mean, log_var, y, beta: float = 0.5, beta_var: float | None = None
+) -> torch.Tensor:
+    """beta-NLL (Seitzer et al. 2022): NLL weighted by var^beta, so the means of
+    hard examples are still learned. Summed over targets, averaged over the batch.
+
+    ``beta_var`` (default ``beta``) weighs the variance's gradient separately. With
+    ``beta_var = 0`` every example pulls on its variance equally: under ``beta`` alone,
+    precise examples (a pristine line, var ~ 1e-3 in standardised units) weigh ~30x
+    less than corrupted ones in the variance fit, and the head leaves their variance
+    several times too wide.
+    """
+    if beta_var is None or beta_var == beta:
+        nll = 0.5 * (log_var + (y - mean) ** 2 / log_var.exp())
+        if beta:
+            nll = nll * log_var.detach().exp() ** beta
+        return nll.sum(dim=1).mean()
+    var, sq = log_var.exp(), (y - mean) ** 2
+    v = var.detach()
+    mean_term = 0.5 * sq / v * v**beta  # gradient of beta-NLL in the mean only
+    var_term = 0.5 * (log_var + sq.detach() / var) * v**beta_var  # ... in the variance only
+    return (mean_term + var_term).sum(dim=1).mean()
+
+
+@dataclass
+class LineEnsemble:
+    """Members, target normalisation and the calibration of their predictive spread.
+
+    The calibrated std of a line is ``scale * sd ** exponent`` (``sd`` the ensemble's
+    raw predictive std, standardised units): ``scale`` and ``exponent`` have one entry
+    per target (n_targets,) or, with ``classes``, one row per class of line
+    (n_classes, n_targets); no ``exponent`` means 1 (a plain scale factor). ``shape``
+    (n_targets, len(SHAPE_LEVELS)) holds the quantiles of ``|error| / calibrated std``
+    on the calibration lines, from which :meth:`z_at` gives the half-width of an
+    interval at any level (a Gaussian's without it).
+    """
+
+    members: list[LineCNN]
+    spec: LineSpec
+    y_mean: np.ndarray
+    y_std: np.ndarray
+    scale: np.ndarray = field(default_factory=lambda: np.ones(len(TARGETS)))
+    expert: TrainedModel | None = None
+    classes: SpreadClasses | None = None
+    exponent: np.ndarray | None = None
+    shape: np.ndarray | None = None
+
+    def z_at(self, level: float) -> np.ndarray:
+        """Half-width of the central interval at ``level`` in calibrated stds, per target
+        (n_targets,): interpolated in ``shape``, or the Gaussian quantile without it."""
+        if self.shape is None:
+            return np.full(len(TARGETS), gaussian_z(level))
+        return np.array([np.interp(level, SHAPE_LEVELS, q) for q in self.shape])
+
+    def line_classes(self, X: torch.Tensor, C: torch.Tensor) -> np.ndarray:
+        """Spread class of each input line (:class:`SpreadClasses`; all 0 without)."""
+        if self.classes is None:
+            return np.zeros(X.shape[0], int)
+        ratio = C[:, 0].numpy().astype(float) + 1.0
+        return self.classes.classify(input_force_nN(X, self.spec), ratio)
+
+    def expert_for(self, X: torch.Tensor) -> torch.Tensor | None:
+        """The members' expert inputs for ``X`` (None for a model without an expert)."""
+        if self.expert is None:
+            return None
+        return expert_inputs(self.expert, X, self.spec, self.y_mean, self.y_std)
+
+    @torch.inference_mode()
+    def predict_std(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Predictive mean and calibrated std in standardised target units (B, n_targets);
+        the central interval at level ``q`` is ``mean +- z_at(q) * std``."""
+        # batch norm folded, and chunks small enough for the activations to stay in
+        # cache: about 5x faster on a CPU than one big batch
+        fused = [m.fused() for m in self.members]
+        E = self.expert_for(X)
+        means = np.empty((len(fused), X.shape[0], len(TARGETS)), np.float32)
+        variances = np.empty_like(means)
+        for k, m in enumerate(fused):
+            for i in range(0, X.shape[0], INFER_CHUNK):
+                sl = slice(i, i + INFER_CHUNK)
+                mu, lv = m(X[sl], C[sl], None if E is None else E[sl])
+                means[k, sl] = mu.numpy()
+                variances[k, sl] = lv.exp().numpy()
+        sd = np.sqrt(np.mean(variances, axis=0) + means.var(axis=0))
+        scale = np.asarray(self.scale)
+        exponent = np.ones_like(scale) if self.exponent is None else np.asarray(self.exponent)
+        if scale.ndim == 2:
+            cls = self.line_classes(X, C)
+            scale, exponent = scale[cls], exponent[cls]
+        return means.mean(axis=0), scale * sd**exponent
+
+    def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
+        mu, sd = self.predict_std(X, C)
+        return mu * self.y_std + self.y_mean, sd * self.y_std
+
+
+@dataclass(frozen=True)
+class SpreadClasses:
+    """Classes of lines whose predictive spread is calibrated separately.
+
+    The networks' spread is right on average but not in every kind of line: on a quiet
+    line (no detector noise, as in a simulation) it is several times too wide, and
+    how much depends on whether the line was resampled onto the reference lattice.
+    Both can be read off the line itself, so each class gets its own scale factors:
+
+    - 0: quiet, recorded on the reference lattice (not resampled);
+    - 1: quiet, resampled from another lattice;
+    - 2, 3, ...: noisy, by noise level, between ``noise_edges``.
+
+    The noise level is ln of the median absolute second difference of the mapped line
+    (nN): a slip moves few pixels, so in a quiet line it stays tiny, while white
+    detector noise raises it directly. A line is quiet below ``quiet_below``.
+    """
+
+    quiet_below: float = -3.0
+    noise_edges: tuple[float, ...] = (-2.2, -1.7)
+
+    @property
+    def n(self) -> int:
+        """Number of classes."""
+        return 3 + len(self.noise_edges)
+
+    def classify(self, force_nN: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
+        """Class of each of B mapped lines of equal length.
+
+        Parameters
+        ----------
+        force_nN : ndarray (B, L)
+            Mapped lines (on the reference lattice and pixel).
+        lattice_ratio : ndarray (B,)
+            ``a / a0`` of each line (1: recorded on the reference lattice).
+        """
+        return self._from_level(noise_level(force_nN), lattice_ratio)
+
+    def classify_lines(self, lines: list[np.ndarray], lattice_ratio: np.ndarray) -> np.ndarray:
+        """:meth:`classify` for mapped lines of any lengths."""
+        return self._from_level(np.array([noise_level(f) for f in lines]), lattice_ratio)
+
+    def _from_level(self, level: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
+        on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
+        noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
+        return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy).astype(int)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def noise_level(force_nN: np.ndarray) -> np.ndarray:
+    """ln of the median absolute second difference (nN) of each row of ``force_nN``."""
+    d2 = np.abs(np.diff(np.asarray(force_nN, float), n=2, axis=-1))
+    return np.log(np.median(d2, axis=-1) + 1e-4)
+
+
+@dataclass
+class LinePrediction:
+    """Estimates for N traces with uncertainty (arrays of length N).
+
+    ``values[name]`` is the predictive mean (median for the log-normal U0, K, eta),
+    ``std[name]`` its standard deviation (that of the Gaussian, or log-normal, with the
+    same 68 % interval: the errors' tails are heavier than a Gaussian's), ``lo68/hi68``
+    and ``lo95/hi95`` the central 68 % and 95 % intervals, for name in
+    ``F_mean_nN, U0_eV, K_N_m, eta``.
+    """
+
+    values: dict[str, np.ndarray]
+    std: dict[str, np.ndarray]
+    lo68: dict[str, np.ndarray]
+    hi68: dict[str, np.ndarray]
+    lo95: dict[str, np.ndarray]
+    hi95: dict[str, np.ndarray]
+
+
+def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
+                      batch: int = 2048) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Standardised predictive mean and std (N, n_targets) of mapped lines, each read
+    whole: lines of equal length are batched together."""
+    n = len(lines)
+    mu = np.empty((n, len(TARGETS)))
+    sd = np.empty((n, len(TARGETS)))
+    sizes = np.array([f.size for f in lines])
+    for size in np.unique(sizes):
+        idx = np.flatnonzero(sizes == size)
+        for start in range(0, idx.size, batch):
+            sel = idx[start : start + batch]
+            X = line_inputs([lines[i] for i in sel], ens.spec)
+            mu[sel], sd[sel] = ens.predict_std(X, cond[sel])
+    return mu, sd
+
+
+def predict_lines(
+    ens: LineEnsemble,
+    lines: list[np.ndarray],
+    lattice_nm: np.ndarray,
+    velocity_nm_per_s: np.ndarray,
+    trace_mean_nN: np.ndarray,
+    batch: int = 2048,
+) -> LinePrediction:
+    """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity.
+
+    ``trace_mean_nN`` is each trace's own mean force (on its original samples), to which
+    the predicted friction correction is added. Lines of equal length are batched
+    together; each is read whole (no crop).
+    """
+    n = len(lines)
+    a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
+    v = np.broadcast_to(np.asarray(velocity_nm_per_s, float), (n,))
+    mu, sd = predict_std_lines(ens, lines, conditioning(a, v, ens.spec), batch)
+    mu, sd = mu * ens.y_std + ens.y_mean, sd * ens.y_std
+    s = a / ens.spec.lattice_nm
+    shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
+    z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
+    out = LinePrediction({}, {}, {}, {}, {}, {})
+    for j, name in enumerate(("F_mean_nN", "U0_eV", "K_N_m", "eta")):
+        m, h68, h95 = mu[:, j], z68[j] * sd[:, j], z95[j] * sd[:, j]
+        e = h68 / Z68  # std of the Gaussian with this 68 % interval
+        if name == "F_mean_nN":
+            m = m + np.asarray(trace_mean_nN, float)
+            out.values[name], out.std[name] = m, e
+            out.lo68[name], out.hi68[name] = m - h68, m + h68
+            out.lo95[name], out.hi95[name] = m - h95, m + h95
+            continue
+        m = m + shift[name]
+        out.values[name] = np.exp(m)
+        # standard deviation of the log-normal
+        out.std[name] = np.exp(m) * np.sqrt(np.expm1(e**2) * np.exp(e**2))
+        out.lo68[name], out.hi68[name] = np.exp(m - h68), np.exp(m + h68)
+        out.lo95[name], out.hi95[name] = np.exp(m - h95), np.exp(m + h95)
+    return out
+
+
+def predict_raw_lines(
+    ens: LineEnsemble,
+    x_nm: list[np.ndarray],
+    force_nN: list[np.ndarray],
+    lattice_nm: np.ndarray,
+    velocity_nm_per_s: np.ndarray,
+) -> LinePrediction:
+    """Map traces of any pixel size and lattice (see :func:`map_line`), then predict.
+
+    Raises
+    ------
+    ValueError
+        If a mapped trace has fewer than ``spec.min_pixels`` pixels.
+    """
+    n = len(force_nN)
+    a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
+    lines = [map_line(x, f, ai, ens.spec) for x, f, ai in zip(x_nm, force_nN, a, strict=True)]
+    short = [i for i, f in enumerate(lines) if f.size < ens.spec.min_pixels]
+    if short:
+        raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
+    means = np.array([np.mean(f) for f in force_nN])
+    return predict_lines(ens, lines, a, velocity_nm_per_s, means)

@@ -1,0 +1,166 @@
+"""The line-model file: an ensemble of whole-line CNNs with everything inference needs.
+
+Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
+
+    format              "stickslip-line-model-1"
+    stickslip_version   version of the package that trained it
+    spec                LineSpec as a dict (reference lattice, pixel, scales, crop)
+    channels            CNN channels
+    members             list of state_dicts, one per ensemble member
+    y_mean, y_std       target normalisation (training set)
+    scale               calibration of the predictive spread: per target, or per class
+                        of line and target
+    exponent            calibrated std = scale * raw std ** exponent, shaped as scale
+                        (absent: 1)
+    shape               quantiles of the calibrated |error| / std at SHAPE_LEVELS, per
+                        target (absent: Gaussian intervals)
+    spread_classes      SpreadClasses as a dict (absent: one scale row for all lines)
+    train_config        LineTrainConfig as a dict
+    dataset             description and fingerprint of the training data
+    metrics             validation metrics recorded at training time
+    n_expert            expert inputs of each member (0, or absent: none)
+    spread_hidden       width of the members' own spread head (0, or absent: none)
+    expert              the window-model payload the members read (absent: none)
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from stickslip._version import __version__
+from stickslip.atomic import atomic_path
+from stickslip.estimators.line.ensemble import (
+    TARGETS,
+    LineCNN,
+    LineEnsemble,
+    LineSpec,
+    SpreadClasses,
+)
+from stickslip.estimators.window.modelfile import ModelFileError, _major, _plain, from_payload
+
+FORMAT = "stickslip-line-model-1"
+BUNDLED = "line_model.pt"
+
+
+def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[int, ...],
+                    train_config: dict, dataset: dict, metrics: dict) -> Path:  # fmt: skip
+    """Write the ensemble and its provenance atomically; returns the path."""
+    payload: dict[str, Any] = {
+        "format": FORMAT,
+        "stickslip_version": __version__,
+        "spec": ens.spec.to_dict(),
+        "channels": list(channels),
+        "members": [{k: v.detach().cpu() for k, v in m.state_dict().items()}
+                    for m in ens.members],  # fmt: skip
+        "y_mean": torch.as_tensor(np.asarray(ens.y_mean, np.float64)),
+        "y_std": torch.as_tensor(np.asarray(ens.y_std, np.float64)),
+        "scale": torch.as_tensor(np.asarray(ens.scale, np.float64)),
+        "train_config": _plain(train_config),
+        "dataset": _plain(dataset),
+        "metrics": _plain(metrics),
+    }
+    payload["spread_hidden"] = ens.members[0].spread_hidden
+    for key in ("exponent", "shape"):  # absent: a plain scale and Gaussian intervals
+        if getattr(ens, key) is not None:
+            payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
+    if ens.classes is not None:
+        payload["spread_classes"] = _plain(ens.classes.to_dict())
+    if ens.expert is not None:
+        payload["n_expert"] = ens.members[0].n_expert
+        payload["expert"] = ens.expert.to_payload()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def line_from_payload(payload: Any, name: str) -> LineEnsemble:
+    """Rebuild a :class:`LineEnsemble` from a loaded payload, checking its format."""
+    made_by = str(payload.get("stickslip_version", "unknown"))
+    if payload.get("format") != FORMAT or _major(made_by) != _major(__version__):
+        raise ModelFileError(
+            f"{name}: model format '{payload.get('format')}' from stickslip {made_by} cannot "
+            f"be read by stickslip {__version__} ({FORMAT})"
+        )
+    try:
+        spec = LineSpec(**payload["spec"])
+        classes = None
+        if "spread_classes" in payload:
+            c = payload["spread_classes"]
+            classes = SpreadClasses(float(c["quiet_below"]),
+                                    tuple(float(e) for e in c["noise_edges"]))  # fmt: skip
+        expert = None
+        if "expert" in payload:
+            expert = from_payload(payload["expert"], f"{name} (expert)")
+        members = []
+        for sd in payload["members"]:
+            net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS),
+                          n_expert=int(payload.get("n_expert", 0)),
+                          spread_hidden=int(payload.get("spread_hidden", 0)))  # fmt: skip
+            net.load_state_dict(sd)
+            net.eval()
+            members.append(net)
+        return LineEnsemble(
+            members=members,
+            spec=spec,
+            y_mean=payload["y_mean"].numpy(),
+            y_std=payload["y_std"].numpy(),
+            scale=payload["scale"].numpy(),
+            expert=expert,
+            classes=classes,
+            exponent=payload["exponent"].numpy() if "exponent" in payload else None,
+            shape=payload["shape"].numpy() if "shape" in payload else None,
+        )
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ModelFileError(f"{name}: damaged model file ({reason})") from None
+
+
+def line_metadata(path: str | os.PathLike) -> dict:
+    """Training config, data description and metrics stored in a line-model file."""
+    p = torch.load(path, map_location="cpu", weights_only=True)
+    return {k: p.get(k) for k in ("train_config", "dataset", "metrics", "stickslip_version")}
+
+
+def load_line_model(path: str | os.PathLike | None = None) -> LineEnsemble:
+    """Load a line-model file, or the bundled one when ``path`` is None.
+
+    Raises
+    ------
+    ModelFileError
+        One line: missing, corrupt, not a line model, or from an incompatible version.
+    """
+    from stickslip.estimators.window.modelfile import load_bundled, read_payload
+
+    if path is None:
+        return load_bundled(BUNDLED, load_line_model)
+    p = Path(path)
+    return line_from_payload(read_payload(p), str(p))
+
+
+def load_any_model(path: str | os.PathLike | None = None):
+    """A window model or a line model, whichever the file holds.
+
+    With no path: the bundled line model if this installation has one, else the
+    bundled window model.
+    """
+    from stickslip.estimators.window.modelfile import FORMAT as WINDOW_FORMAT
+    from stickslip.estimators.window.modelfile import load_model, read_payload
+
+    if path is None:
+        from importlib.resources import files
+
+        if files("stickslip").joinpath("resources", BUNDLED).is_file():
+            return load_line_model(None)
+        return load_model(None)
+    payload = read_payload(path)
+    if payload.get("format") == FORMAT:
+        return line_from_payload(payload, str(path))
+    if payload.get("format") == WINDOW_FORMAT:
+        return from_payload(payload, str(path))
+    return from_payload(payload, str(path))  # raises the one-line format error

@@ -1,0 +1,539 @@
+"""Training of whole-line models with domain randomisation and calibration.
+
+Every batch passes the clean simulated traces through the instrument chain of
+:mod:`stickslip.simulators.instrument` (detector noise, 1/f noise, low-pass, offset
+drift, precursor softening, digitisation), with effects drawn afresh, so the network
+never sees the same corruption twice and cannot rely on clean-simulation artefacts.
+The split is by trajectory; the validation traces get one fixed draw of the effects,
+and the predictive spread is calibrated on them.
+
+The effects' prior. Trained on the broad ranges alone (:data:`TRAIN_EFFECTS`), the
+network is right on a careful measurement but its intervals there are too wide (the
+95 % interval of K covered 99 % of the lab bench's truths): the calibration is then
+fitted mostly on lines noisier and more smeared than a careful measurement gives. The
+default prior (:func:`training_effects`) draws a :data:`TYPICAL_FRACTION` of lines
+from a typical careful measurement (:data:`~stickslip.simulators.instrument.LAB`, a
+corner of the broad ranges) and the rest from the broad ranges, which stay as a tail.
+
+Pristine lines. A line with no detector effects on a flat substrate (as in a clean
+simulation) is a case of its own: nothing in it is ambiguous, so the network can and
+should be far more precise there than on a corrupted line. With effects drawn
+independently such lines would be rare in training (a few per cent), and the network
+would treat a pristine-looking line as a corrupted one that happens to look clean,
+with the corrupted lines' spread. A ``pristine_fraction`` of every batch is therefore
+drawn from the flat-substrate trajectories and left without detector effects: a spike
+in the prior at "no corruption". The calibration then weighs pristine and corrupted
+validation lines equally and reports the coverage of each.
+
+Classes of lines. One scale per target cannot fit every line: the spread is several
+times too wide on quiet lines (no detector noise) and about right on noisy ones, and
+the ratio moves with the noise level. The calibration therefore fits a scale per
+target and per class of line (:class:`~stickslip.estimators.line.ensemble.SpreadClasses`, read off
+the line itself: quiet on the reference lattice, quiet and resampled, noisy by noise
+level), so that the 95 % interval covers 95 % of the validation truths in each class.
+
+Calibration lines. A 95 % quantile read off one draw of the effects on the validation
+trajectories (a few hundred lines per class) carries a sampling error of about 0.01 in
+coverage, as large as the differences it is meant to fix. The calibration therefore
+reads ``calibration_draws`` independent draws of the detector effects on the same
+validation trajectories (the first is the validation set that training follows).
+Within a class the calibrated std is ``c * sd ** gamma`` (:func:`power_fit`: the 95 %
+quantile of the error, regressed on the ensemble's own spread), and the calibrated
+lines' standardised errors give the intervals' shape at every level
+(:meth:`~stickslip.estimators.line.ensemble.LineEnsemble.z_at`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from stickslip.estimators.line.ensemble import (
+    N_EXPERT,
+    SHAPE_LEVELS,
+    TARGETS,
+    Z95,
+    LineCNN,
+    LineEnsemble,
+    LineSpec,
+    SpreadClasses,
+    conditioning,
+    gaussian_nll,
+    line_inputs,
+    map_line,
+    predict_std_lines,
+)
+from stickslip.estimators.window.modelfile import TrainedModel
+from stickslip.simulators.instrument import (
+    LAB,
+    EffectsMixture,
+    InstrumentEffects,
+    apply_instrument,
+)
+from stickslip.units import eta_from
+
+#: Domain randomisation of training: broader than the laboratory bench.
+TRAIN_EFFECTS = InstrumentEffects(
+    white_nN=(0.0, 0.12),
+    pink_nN=(0.0, 0.08),
+    lowpass_px=(0.0, 3.0),
+    drift_nN=(0.0, 0.15),
+    softening=(0.0, 0.5),
+    bits=16,
+)
+
+
+#: Fraction of training lines given a typical careful measurement's detector effects.
+TYPICAL_FRACTION = 0.8
+
+#: Settings only the spread calibration reads: a trained model can be re-calibrated
+#: with other values (``scripts/train_line_model.py --recalibrate``).
+CALIBRATION_FIELDS = ("spread_classes", "calibration_draws", "spread_power")
+
+#: Exponents tried by :func:`power_fit`.
+EXPONENTS = np.linspace(0.5, 2.0, 61)
+
+
+def training_effects(typical_fraction: float) -> InstrumentEffects | EffectsMixture:
+    """Detector effects of training: :data:`TRAIN_EFFECTS`, or a mixture in which a
+    ``typical_fraction`` of lines draw from a typical careful measurement
+    (:data:`~stickslip.simulators.instrument.LAB`, a corner of the broad ranges) and
+    the rest from the broad ranges."""
+    if typical_fraction <= 0:
+        return TRAIN_EFFECTS
+    return EffectsMixture((LAB, TRAIN_EFFECTS), (typical_fraction, 1.0 - typical_fraction))
+
+
+@dataclass(frozen=True)
+class LineTrainConfig:
+    """Settings of a line-model training run (saved in the model file)."""
+
+    members: int = 3
+    epochs: int = 45
+    batch_size: int = 128
+    lr: float = 3e-3
+    weight_decay: float = 1e-4
+    beta: float = 0.5  # beta-NLL weight of the means' gradient (gaussian_nll)
+    beta_var: float = 0.0  # ... of the variances': each line pulls on its variance equally
+    mse_epochs: int = 2
+    clean_fraction: float = 0.2  # traces left without detector effects, so the model
+    # also learns how sure it can be on a clean line
+    pristine_fraction: float = 0.25  # of each batch: flat substrate and no effects
+    own_weight: float = 0.5  # weight of the CNN's own mean in the loss (with an expert)
+    val_fraction: float = 0.1
+    seed: int = 0
+    channels: tuple[int, ...] = (16, 32, 48, 64)
+    spread_hidden: int = 128  # > 0: the log-variances get a head of their own (LineCNN)
+    # classes of lines calibrated separately (None: one scale per target for all lines)
+    spread_classes: SpreadClasses | None = field(default_factory=SpreadClasses)
+    calibration_draws: int = 8  # draws of the detector effects on the validation lines
+    spread_power: bool = True  # calibrated std c * sd**gamma (False: gamma = 1)
+    # detector effects: a typical measurement's for most lines, the broad ranges for the rest
+    effects: InstrumentEffects | EffectsMixture = field(
+        default_factory=lambda: training_effects(TYPICAL_FRACTION))
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def line_targets(U0_eV, K_N_m, F_mean_nN, lattice_nm, spec: LineSpec) -> np.ndarray:
+    """Target matrix (N, 4) in the mapped frame: F, ln U0', ln K', ln eta."""
+    s = np.asarray(lattice_nm, float) / spec.lattice_nm
+    U0, K = np.asarray(U0_eV, float), np.asarray(K_N_m, float)
+    return np.column_stack(
+        [F_mean_nN, np.log(U0 / s), np.log(K * s), np.log(eta_from(U0, K, lattice_nm))]
+    )
+
+
+def corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng, clean_fraction=0.0,
+                    keep_clean: np.ndarray | None = None):  # fmt: skip
+    """Corrupt a batch (a ``clean_fraction`` of traces, and those marked in
+    ``keep_clean``, left clean) and map it: the mapped lines and each corrupted trace's
+    mean (the friction target is the clean mean minus it: see :data:`TARGETS`)."""
+    F, _ = apply_instrument(force_nN, effects, rng)
+    clean = rng.random(F.shape[0]) < clean_fraction
+    if keep_clean is not None:
+        clean |= keep_clean
+    F[clean] = force_nN[clean]
+    lines = [map_line(x_nm, f, a, spec) for f, a in zip(F, lattice_nm, strict=True)]
+    return lines, F.mean(axis=1)
+
+
+def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, rng,
+                  crop: int | None, clean_fraction: float = 0.0,
+                  keep_clean: np.ndarray | None = None):  # fmt: skip
+    """:func:`corrupt_and_map`, then stacked: input and conditioning tensors (lines
+    cropped to ``crop``, at random, or centred on the shortest when None) and the
+    corrupted traces' means."""
+    lines, observed = corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng,
+                                      clean_fraction, keep_clean)  # fmt: skip
+    X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
+    return X, conditioning(lattice_nm, velocity_nm_per_s, spec), observed
+
+
+def flat_substrate(params: dict[str, np.ndarray]) -> np.ndarray:
+    """Trajectories simulated without barrier modulation or defects (all, if unknown)."""
+    n = np.asarray(params["U0_eV"]).size
+    flat = np.ones(n, bool)
+    if "mod_amplitude" in params:
+        flat &= np.asarray(params["mod_amplitude"]) == 0
+    if "defect_count" in params:
+        flat &= np.asarray(params["defect_count"]) == 0
+    return flat
+
+
+def _stratum_weights(strata: np.ndarray) -> np.ndarray:
+    """Row weights with which every stratum weighs the same whatever its size."""
+    w = np.zeros(strata.size)
+    for g in np.unique(strata):
+        w[strata == g] = 1.0 / np.sum(strata == g)
+    return w
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level):
+    """Quantile(s) of ``values`` at ``level`` (a float or an array), rows weighted."""
+    order = np.argsort(values)
+    cw = np.cumsum(weights[order]) / weights.sum()
+    return values[order][np.minimum(np.searchsorted(cw, level), cw.size - 1)]
+
+
+def balanced_scale(z_abs: np.ndarray, strata: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """Per-column scale ``c`` such that ``|z| / c <= Z95`` holds for ``level`` of the rows,
+    each stratum weighing the same whatever its size (a weighted quantile of ``|z|``)."""
+    w = _stratum_weights(strata)
+    return np.array([_weighted_quantile(z_abs[:, j], w, level) / Z95
+                     for j in range(z_abs.shape[1])])  # fmt: skip
+
+
+def power_fit(err_abs: np.ndarray, sd: np.ndarray, weights: np.ndarray, level: float = 0.95,
+              exponents: np.ndarray = EXPONENTS) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Calibrated spread ``scale * sd ** exponent`` per column of (N, T) errors and stds.
+
+    ``Z95 * scale * sd ** exponent`` is a linear quantile regression at ``level`` of
+    ``ln |error|`` on ``ln sd`` (weighted rows; the exponent from a grid, the one of least
+    pinball loss, the offset then exact): the ``level`` quantile of ``|error|`` given the
+    spread, since quantiles commute with ``ln``. Exponent 1 is a plain scale factor.
+
+    Returns
+    -------
+    scale, exponent : ndarray (T,)
+    """
+    w = weights / weights.sum()
+    scale, exponent = np.empty(err_abs.shape[1]), np.empty(err_abs.shape[1])
+    for j in range(err_abs.shape[1]):
+        le, ls = np.log(err_abs[:, j] + 1e-12), np.log(sd[:, j])
+        best = np.inf
+        for g in exponents:
+            r = le - g * ls
+            a = _weighted_quantile(r, w, level)
+            u = r - a
+            loss = np.sum(w * np.maximum(level * u, (level - 1.0) * u))
+            if loss < best - 1e-12:
+                best, scale[j], exponent[j] = loss, np.exp(a) / Z95, g
+    return scale, exponent
+
+
+def _standardise_friction(Y: np.ndarray, observed_mean: np.ndarray, y_mean, y_std):
+    """Standardised targets with the friction column made relative to the trace's mean."""
+    Y = Y.copy()
+    Y[:, 0] -= observed_mean
+    return torch.from_numpy(((Y - y_mean) / y_std).astype(np.float32))
+
+
+def split(n: int, config: LineTrainConfig, rng: np.random.Generator):
+    """(validation, training) trajectory indices: the first draw of the training rng."""
+    perm = rng.permutation(n)
+    n_val = max(1, int(round(config.val_fraction * n)))
+    return perm[:n_val], perm[n_val:]
+
+
+@dataclass
+class ValidationSet:
+    """Held-out lines as the network sees them, in two strata.
+
+    ``lines`` are the mapped lines, whole (calibration reads them as inference does),
+    ``C`` the conditioning, ``rows`` the source trajectories (the flat-substrate ones twice),
+    ``strata`` 0 for a corrupted line (drawn like training ones, same clean fraction)
+    and 1 for a pristine one, ``observed_mean`` each input line's mean force.
+    """
+
+    lines: list[np.ndarray]
+    C: torch.Tensor
+    rows: np.ndarray
+    strata: np.ndarray
+    observed_mean: np.ndarray
+
+
+def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
+                   spec: LineSpec, draw: int = 0) -> ValidationSet:  # fmt: skip
+    """The validation lines of :func:`train_line_ensemble` (one fixed draw of effects;
+    ``draw`` > 0: another independent one, for the calibration)."""
+    val_rng = np.random.default_rng([config.seed, 999, draw] if draw else [config.seed, 999])
+    val_p = val[flat_substrate(params)[val]]
+    a = params["lattice_nm"]
+    corrupted, mean_c = corrupt_and_map(force_nN[val], a[val], x_nm, spec, config.effects,
+                                        val_rng, config.clean_fraction)  # fmt: skip
+    pristine, mean_p = corrupt_and_map(force_nN[val_p], a[val_p], x_nm, spec, config.effects,
+                                       val_rng, keep_clean=np.ones(val_p.size, bool))  # fmt: skip
+    rows = np.concatenate([val, val_p])
+    return ValidationSet(
+        lines=corrupted + pristine,
+        C=conditioning(a[rows], params["velocity_nm_per_s"][rows], spec),
+        rows=rows,
+        strata=np.repeat([0, 1], [val.size, val_p.size]),
+        observed_mean=np.concatenate([mean_c, mean_p]),
+    )
+
+
+def calibration_set(vs: ValidationSet, force_nN, x_nm, params, config: LineTrainConfig,
+                    spec: LineSpec) -> ValidationSet:  # fmt: skip
+    """The validation trajectories under ``config.calibration_draws`` independent draws of
+    the detector effects, as one set: ``vs`` (:func:`validation_set`'s first draw) and
+    the draws after it."""
+    val = vs.rows[vs.strata == 0]
+    sets = [vs] + [validation_set(force_nN, x_nm, params, val, config, spec, draw=k)
+                   for k in range(1, config.calibration_draws)]  # fmt: skip
+    return ValidationSet(
+        lines=[f for s in sets for f in s.lines],
+        C=torch.cat([s.C for s in sets]),
+        rows=np.concatenate([s.rows for s in sets]),
+        strata=np.concatenate([s.strata for s in sets]),
+        observed_mean=np.concatenate([s.observed_mean for s in sets]),
+    )
+
+
+def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
+             rng: np.random.Generator) -> tuple[np.ndarray, ValidationSet, np.ndarray]:  # fmt: skip
+    """Training indices, validation lines and the target matrix (:func:`line_targets`) of
+    a run with ``config``; ``rng`` is the run's, its first draw the split (:func:`split`),
+    so training and re-calibration see the same validation lines."""
+    val, train = split(force_nN.shape[0], config, rng)
+    vs = validation_set(force_nN, x_nm, params, val, config, spec)
+    Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
+                     params["lattice_nm"], spec)  # fmt: skip
+    return train, vs, Y
+
+
+def class_fit(err_abs: np.ndarray, sd: np.ndarray, classes: np.ndarray, n_classes: int,
+              strata: np.ndarray, power: bool = True,
+              min_lines: int = 30) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Calibrated spread per class, (scale, exponent) each (n_classes, n_targets): 95 % of
+    each class's lines inside the interval (its lines weighing equally: the class, not
+    the stratum, now says what kind of line it is); :func:`power_fit` when ``power``,
+    else a plain scale (exponent 1). A class with fewer than ``min_lines`` lines gets the
+    pooled fit, strata weighing equally."""
+
+    def fit(m: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if power:
+            return power_fit(err_abs[m], sd[m], w)
+        z = err_abs[m] / sd[m]
+        return np.array([_weighted_quantile(z[:, j], w, 0.95) / Z95
+                         for j in range(z.shape[1])]), np.ones(z.shape[1])  # fmt: skip
+
+    pooled = fit(np.ones(classes.size, bool), _stratum_weights(strata))
+    scale, exponent = (np.tile(p, (n_classes, 1)) for p in pooled)
+    for c in range(n_classes):
+        m = classes == c
+        if m.sum() >= min_lines:
+            scale[c], exponent[c] = fit(m, np.ones(int(m.sum())))
+    return scale, exponent
+
+
+def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
+              classes: SpreadClasses | None = None, power: bool = True):  # fmt: skip
+    """Fit the spread calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
+    :func:`line_targets` units): per class of line when ``classes`` is given (else one
+    class, strata weighing equally), :func:`class_fit`, then the standardised errors'
+    quantiles (``ens.shape``). Returns the standardised predictive means, the calibrated
+    ``|z|`` and the class of every calibration line."""
+    ens.scale, ens.exponent, ens.shape, ens.classes = np.ones(len(TARGETS)), None, None, classes
+    mu, sd = predict_std_lines(ens, cs.lines, cs.C)
+    err = np.abs(mu - _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean,
+                                            ens.y_std).numpy())  # fmt: skip
+    if classes is None:
+        cls, n_classes = np.zeros(len(cs.lines), int), 1
+    else:
+        cls = classes.classify_lines(cs.lines, cs.C[:, 0].numpy().astype(float) + 1.0)
+        n_classes = classes.n
+    scale, exponent = class_fit(err, sd, cls, n_classes, cs.strata, power)
+    z_cal = err / (scale[cls] * sd ** exponent[cls])
+    per_class = classes is not None
+    ens.scale, ens.exponent = (scale, exponent) if per_class else (scale[0], exponent[0])
+    # weighed as in the fit: lines equally within classes, strata equally without
+    w = np.ones(cls.size) if per_class else _stratum_weights(cs.strata)
+    ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
+                          for j in range(z_cal.shape[1])])  # fmt: skip
+    return mu, z_cal, cls
+
+
+def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
+                         classes: SpreadClasses | None = None,
+                         power: bool = True) -> dict:  # fmt: skip
+    """Calibrate ``ens`` on calibration lines (:func:`calibrate`) and report its errors and
+    interval coverage there, overall, per stratum (corrupted, pristine) and per class."""
+    mu, z_cal, cls = calibrate(ens, cs, Y_cal, classes, power)
+    z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
+    pred = mu * ens.y_std + ens.y_mean
+    pred[:, 0] += cs.observed_mean
+    rel = np.exp(pred[:, 1:] - Y_cal[:, 1:]) - 1.0
+
+    def named(values) -> dict:
+        names = TARGETS if len(values) == len(TARGETS) else TARGETS[1:]
+        return dict(zip(names, np.asarray(values).tolist(), strict=True))
+
+    report = {
+        "n_calibration": len(cs.lines),
+        "val_rmse_F_mean_nN": float(np.sqrt(np.mean((pred[:, 0] - Y_cal[:, 0]) ** 2))),
+        "val_rel_rmse": named(np.sqrt(np.mean(rel**2, axis=0))),
+        "val_coverage95": named(np.mean(z_cal <= z95, axis=0)),
+        "val_coverage68": named(np.mean(z_cal <= z68, axis=0)),
+        "interval_z68": named(z68),
+    }
+    if classes is None:
+        report["calibration_scale"] = named(ens.scale)
+        report["calibration_exponent"] = named(ens.exponent)
+    else:
+        report["spread_classes"] = classes.to_dict()
+        report["calibration_scale"] = [named(row) for row in ens.scale]
+        report["calibration_exponent"] = [named(row) for row in ens.exponent]
+        report["val_per_class"] = [
+            {"class": c, "n": int(np.sum(cls == c)),
+             "coverage95": named(np.mean(z_cal[cls == c] <= z95, axis=0))}
+            for c in range(classes.n) if np.any(cls == c)
+        ]  # fmt: skip
+    for g, name in ((0, "corrupted"), (1, "pristine")):
+        m = cs.strata == g
+        report[f"val_{name}"] = {
+            "n": int(m.sum()),
+            "rel_rmse": named(np.sqrt(np.mean(rel[m] ** 2, axis=0))),
+            "coverage95": named(np.mean(z_cal[m] <= z95, axis=0)),
+            "coverage68": named(np.mean(z_cal[m] <= z68, axis=0)),
+        }
+    return report
+
+
+def calibrate_on_validation(ens: LineEnsemble, vs: ValidationSet, Y: np.ndarray,
+                            force_nN: np.ndarray, x_nm: np.ndarray,
+                            params: dict[str, np.ndarray],
+                            config: LineTrainConfig) -> dict:  # fmt: skip
+    """:func:`calibrate_and_report` on the calibration lines of a run's validation
+    trajectories (:func:`calibration_set`; ``vs`` and ``Y`` from :func:`held_out`)."""
+    cs = calibration_set(vs, force_nN, x_nm, params, config, ens.spec)
+    return calibrate_and_report(ens, cs, Y[cs.rows], config.spread_classes, config.spread_power)
+
+
+def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.ndarray,
+                              params: dict[str, np.ndarray],
+                              config: LineTrainConfig) -> dict:  # fmt: skip
+    """Re-fit the spread calibration of an ensemble that :func:`train_line_ensemble` trained
+    on these traces with this ``config`` (the calibration settings, ``CALIBRATION_FIELDS``,
+    may differ), on the same validation trajectories (the members are left as they
+    are); returns the report of :func:`calibrate_and_report`."""
+    _, vs, Y = held_out(force_nN, x_nm, params, config, ens.spec,
+                        np.random.default_rng(config.seed))  # fmt: skip
+    return calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config)
+
+
+def train_line_ensemble(
+    force_nN: np.ndarray,
+    x_nm: np.ndarray,
+    params: dict[str, np.ndarray],
+    config: LineTrainConfig = LineTrainConfig(),
+    spec: LineSpec = LineSpec(),
+    progress: bool = True,
+    expert: TrainedModel | None = None,
+) -> tuple[LineEnsemble, dict]:
+    """Train an ensemble on simulated traces; returns it and a report (losses, metrics).
+
+    Parameters
+    ----------
+    force_nN : ndarray (N, P)
+        Clean simulated traces.
+    x_nm : ndarray (P,)
+        Their positions.
+    params : dict
+        Per-trace ``U0_eV``, ``K_N_m``, ``F_mean_nN``, ``lattice_nm``,
+        ``velocity_nm_per_s``.
+    expert : TrainedModel, optional
+        A window model whose estimates the members read and gate (see
+        :mod:`stickslip.estimators.line.ensemble`); it must read the reference lattice and pixel.
+    """
+    if expert is not None and (
+        not np.isclose(expert.features.pixel_nm, spec.pixel_nm)
+        or not np.isclose(expert.features.lattice_nm, spec.lattice_nm)
+    ):
+        raise ValueError("the expert must read lines on the line model's lattice and pixel")
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    train, vs, Y = held_out(force_nN, x_nm, params, config, spec, rng)
+    a, v = params["lattice_nm"], params["velocity_nm_per_s"]
+    flat_train = train[flat_substrate(params)[train]]
+    # friction: the network predicts the correction to the observed mean (~ the offset)
+    y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
+    y_mean[0], y_std[0] = 0.0, 0.05
+    ens = LineEnsemble(members=[], spec=spec, y_mean=y_mean, y_std=y_std, expert=expert)
+    Xv = line_inputs(vs.lines, spec)  # cropped to a common length, to follow the loss
+    Cv, Ev = vs.C, ens.expert_for(Xv)
+    Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
+    history = []
+    steps_per_epoch = max(1, train.size // config.batch_size)
+    t0 = time.perf_counter()
+    for k in range(config.members):
+        net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0,
+                      spread_hidden=config.spread_hidden)  # fmt: skip
+        opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        sched = torch.optim.lr_scheduler.OneCycleLR(
+            opt, max_lr=config.lr, total_steps=config.epochs * steps_per_epoch
+        )
+        bar = tqdm(range(config.epochs), desc=f"member {k + 1}/{config.members}",
+                   disable=not progress)  # fmt: skip
+        for epoch in bar:
+            net.train()
+            order = rng.permutation(train)
+            total = 0.0
+            for b in range(steps_per_epoch):
+                idx = order[b * config.batch_size : (b + 1) * config.batch_size]
+                keep = np.zeros(idx.size, bool)
+                if flat_train.size and config.pristine_fraction > 0:
+                    n_p = int(rng.binomial(idx.size, config.pristine_fraction))
+                    idx[:n_p] = rng.choice(flat_train, n_p)
+                    keep[:n_p] = True
+                X, C, obs = prepare_batch(force_nN[idx], a[idx], v[idx], x_nm, spec,
+                                          config.effects, rng, crop=spec.crop,
+                                          clean_fraction=config.clean_fraction,
+                                          keep_clean=keep)  # fmt: skip
+                mean, log_var, own = net.parts(X, C, ens.expert_for(X))
+                y = _standardise_friction(Y[idx], obs, y_mean, y_std)
+                if epoch < config.mse_epochs:
+                    loss = ((mean - y) ** 2).sum(dim=1).mean()
+                else:
+                    loss = gaussian_nll(mean, log_var, y, config.beta, config.beta_var)
+                if net.n_expert:  # the own mean must stay an estimate (LineCNN.parts)
+                    loss = loss + config.own_weight * gaussian_nll(own, log_var.detach(), y,
+                                                                   config.beta)  # fmt: skip
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                sched.step()
+                total += loss.item()
+            net.eval()
+            with torch.inference_mode():
+                mv, _ = net(Xv, Cv, Ev)
+                val_mse = float(((mv - Yv) ** 2).mean())
+            history.append({"member": k, "epoch": epoch, "loss": total / steps_per_epoch,
+                            "val_mse": val_mse})  # fmt: skip
+            bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
+        ens.members.append(net)
+    report = {
+        **calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config),
+        "history": history,
+        "train_seconds": time.perf_counter() - t0,
+        "n_train": int(train.size),
+        "n_val": int(vs.rows.size),
+    }
+    return ens, report

@@ -1,0 +1,245 @@
+"""The result table every estimator returns: one row per trace, one set of column names.
+
+Columns, in this order where present:
+
+- ``trace`` (the name ``infer`` writes: the file stem for a one-trace file, the line's
+  full name for map lines), ``estimator``, ``quality`` (``ok`` or the reason there is
+  no estimate: a refusal, or an unreadable input);
+- the estimates ``F_mean_nN, U0_eV, K_N_m, eta``, then ``*_std``, and where the
+  estimator gives intervals ``*_lo68, *_hi68, *_lo95, *_hi95``;
+- the conditions used and the source of each (:mod:`stickslip.conditions`);
+- provenance: ``file, channel, direction, line, load, load_unit``;
+- then the estimator's own columns (``regime``, ``k_exp_N_m``, ``n_windows``, ``gof``,
+  ``classical_*`` ...), and any other metadata of the trace (``meta_*`` where its name
+  is taken).
+
+One file convention for every format: a missing value is an empty cell in CSV and
+``null`` in JSON. ``--out`` picks the format by extension (``.csv``, ``.json``,
+``.parquet``; the last needs pyarrow, ``pip install 'stickslip[parquet]'``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stickslip.atomic import atomic_path, write_text_atomic
+from stickslip.conditions import QUANTITIES
+
+TARGETS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
+BOUNDS = ("lo68", "hi68", "lo95", "hi95")
+HEAD = ("trace", "estimator", "quality")
+STD_COLUMNS = tuple(f"{k}_std" for k in TARGETS)
+INTERVAL_COLUMNS = tuple(f"{k}_{b}" for b in BOUNDS for k in TARGETS)
+CONDITION_COLUMNS = tuple(c for q in QUANTITIES for c in (q, q.split("_")[0] + "_source"))
+PROVENANCE = ("file", "channel", "direction", "line", "load", "load_unit")
+COLUMNS = (*HEAD, *TARGETS, *STD_COLUMNS, *INTERVAL_COLUMNS, *CONDITION_COLUMNS, *PROVENANCE)
+OK = "ok"
+TABLE_SUFFIXES = (".csv", ".json", ".parquet")
+# trace metadata that is not provenance: the unit is a reading detail, the conditions
+# have their own columns
+_SKIP_META = {"unit", "calibrated", *QUANTITIES}
+
+
+class TableFormatError(ValueError):
+    """An output path whose extension is not a table format."""
+
+
+def table_format(path: str | os.PathLike) -> str:
+    """The table format of an output path (``csv``, ``json`` or ``parquet``).
+
+    Raises
+    ------
+    TableFormatError
+        For any other extension (one line naming it and the choices).
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in TABLE_SUFFIXES:
+        raise TableFormatError(
+            f"{path}: unknown table format '{suffix or '(none)'}'; use "
+            + ", ".join(TABLE_SUFFIXES)
+        )
+    return suffix[1:]
+
+
+def is_missing(value: Any) -> bool:
+    """True for None and NaN (the one 'missing' of the table)."""
+    if value is None:
+        return True
+    return isinstance(value, (float, np.floating)) and math.isnan(value)
+
+
+def _plain(value: Any) -> Any:
+    if is_missing(value):
+        return None
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    return value
+
+
+def provenance(trace: Any) -> dict[str, Any]:
+    """The provenance columns of a trace, and its other scalar metadata."""
+    meta = dict(getattr(trace, "meta", {}) or {})
+    row: dict[str, Any] = {"file": getattr(trace, "source", "") or None}
+    for k in PROVENANCE[1:]:
+        if not is_missing(meta.get(k)):
+            row[k] = meta[k]
+    for k, v in meta.items():
+        if k in row or k in _SKIP_META or k in PROVENANCE:
+            continue
+        if isinstance(v, (str, int, float, np.integer, np.floating)) and not is_missing(v):
+            row[f"meta_{k}" if k in COLUMNS or k.startswith("classical_") else k] = v
+    return row
+
+
+@dataclass
+class ResultTable:
+    """Rows of estimates (dicts keyed by column name), with the table's metadata.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per trace; a missing value is None or NaN.
+    estimator : str
+        Name of the estimator that made the rows.
+    intervals : bool
+        Whether the rows carry ``*_lo68 ... *_hi95``.
+    notes : list of str
+        Things the user should know about the run (one line each).
+    """
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    estimator: str = ""
+    intervals: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    @property
+    def columns(self) -> list[str]:
+        """Column order: the standard columns present, then the others as first seen."""
+        seen: dict[str, None] = {}
+        for r in self.rows:
+            for k in r:
+                seen.setdefault(k, None)
+        std = [c for c in COLUMNS if c in seen]
+        if self.intervals:  # intervals are columns even if every value is missing
+            std = [c for c in COLUMNS if c in seen or c in INTERVAL_COLUMNS]
+        return std + [c for c in seen if c not in COLUMNS]
+
+    def ok(self) -> list[dict[str, Any]]:
+        """Rows with an estimate."""
+        return [r for r in self.rows if r.get("quality") == OK]
+
+    def column(self, name: str) -> np.ndarray:
+        """One numeric column as floats (NaN where missing or not a number)."""
+        out = np.full(len(self.rows), np.nan)
+        for i, r in enumerate(self.rows):
+            v = r.get(name)
+            if isinstance(v, (int, float, np.integer, np.floating)) and not is_missing(v):
+                out[i] = float(v)
+        return out
+
+    def extend(self, other: ResultTable) -> None:
+        """Append another table's rows and notes."""
+        self.rows.extend(other.rows)
+        self.notes.extend(n for n in other.notes if n not in self.notes)
+
+    def records(self) -> list[dict[str, Any]]:
+        """Rows as plain Python values, every column present (None where missing)."""
+        cols = self.columns
+        return [{c: _plain(r.get(c)) for c in cols} for r in self.rows]
+
+    def to_frame(self):
+        """The table as a pandas DataFrame (missing values as NaN / None)."""
+        import pandas as pd
+
+        return pd.DataFrame.from_records(self.records(), columns=self.columns)
+
+    def to_csv(self) -> str:
+        """CSV text: LF line endings, missing values as empty cells."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        cols = self.columns
+        w.writerow(cols)
+        for r in self.records():
+            w.writerow([_cell(r[c]) for c in cols])
+        return buf.getvalue()
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the table atomically in the format its extension names."""
+        fmt = table_format(path)
+        path = Path(path)
+        if fmt == "csv":
+            write_text_atomic(path, self.to_csv())
+        elif fmt == "json":
+            write_text_atomic(path, json.dumps(self.records(), indent=1) + "\n")
+        else:
+            frame = self.to_frame()
+            with atomic_path(path) as tmp:
+                frame.to_parquet(tmp, index=False)
+        return path
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def failure_row(name: str, reason: str, estimator: str, file: str | None = None,
+                extra: Mapping[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+    """The row of a trace (or an input) with no estimate: its name and the reason."""
+    row = {"trace": name, "estimator": estimator, "quality": reason}
+    if file:
+        row["file"] = file
+    row.update(extra or {})
+    return row
+
+
+def read_table(path: str | os.PathLike) -> list[dict[str, str]]:
+    """Rows of a CSV table as strings (as a person or ``label`` writes it)."""
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def concat(tables: Iterable[ResultTable]) -> ResultTable:
+    """One table from several (rows in order; the first's estimator name)."""
+    tables = list(tables)
+    out = ResultTable(estimator=tables[0].estimator if tables else "",
+                      intervals=any(t.intervals for t in tables))  # fmt: skip
+    for t in tables:
+        out.extend(t)
+    return out
+
+
+def float_or_nan(value: Any) -> float:
+    """A table cell as float (NaN for empty or non-numeric)."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def by_trace(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
+    """Rows grouped by their ``trace`` name (several where a name repeats)."""
+    out: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(str(r.get("trace", "")), []).append(r)
+    return out

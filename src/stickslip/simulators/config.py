@@ -1,0 +1,203 @@
+"""Simulation settings as dataclasses (saved next to every dataset).
+
+Units are in the names. Defaults are the reference paper's "paper" preset
+(../shared/PHYSICS.md): m = 1e-12 kg, Gamma = 1e7 1/s, v = 60 nm/s, T = 296 K,
+a = 0.246 nm (graphene), dt = 10 ns, 11 nm recorded as 512 pixels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from stickslip.units import eta_from, fmax_nN
+
+
+class SettingsError(ValueError):
+    """Invalid physical or sampling settings; ``str()`` is one line for the user."""
+
+
+@dataclass(frozen=True)
+class PhysicalSettings:
+    """Physical and recording settings shared by all trajectories of a run.
+
+    Per-trajectory arrays given to :func:`stickslip.simulators.simulate` override the
+    physical ones (mass, damping, velocity, temperature, lattice).
+
+    Attributes
+    ----------
+    mass_kg : float
+        Effective tip mass m.
+    damping_per_s : float
+        Langevin damping rate Gamma (friction term ``-m Gamma x'``).
+    velocity_nm_per_s : float
+        Support (cantilever base) velocity v.
+    temperature_K : float
+        Temperature T of the thermal noise.
+    lattice_nm : float
+        Lattice spacing a of ``U(x) = -(U0/2) cos(2 pi x / a)``.
+    dt_s : float
+        Nominal time step. The step actually used is adjusted by well under 0.1 % per
+        trajectory so that a pixel holds an integer number of steps.
+    length_nm : float
+        Recorded support travel (the scan line).
+    pixels : int
+        Pixels of the recorded line; each is the mean force over its travel window.
+    warmup_nm : float or None
+        Support travel discarded before recording. ``None``: per trajectory
+        ``max(1 nm, F_max/K + 4a)``, so the initial loading ramp is never recorded.
+    """
+
+    mass_kg: float = 1e-12
+    damping_per_s: float = 1e7
+    velocity_nm_per_s: float = 60.0
+    temperature_K: float = 296.0
+    lattice_nm: float = 0.246
+    dt_s: float = 1e-8
+    length_nm: float = 11.0
+    pixels: int = 512
+    warmup_nm: float | None = None
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.mass_kg > 0, f"mass must be > 0 kg (got {self.mass_kg})"),
+            (self.damping_per_s >= 0, f"damping must be >= 0 1/s (got {self.damping_per_s})"),
+            (self.velocity_nm_per_s > 0, f"velocity must be > 0 nm/s ({self.velocity_nm_per_s})"),
+            (self.temperature_K >= 0, f"temperature must be >= 0 K (got {self.temperature_K})"),
+            (self.lattice_nm > 0, f"lattice spacing must be > 0 nm (got {self.lattice_nm})"),
+            (self.dt_s > 0, f"time step must be > 0 s (got {self.dt_s})"),
+            (self.length_nm > 0, f"line length must be > 0 nm (got {self.length_nm})"),
+            (self.pixels >= 8, f"pixels must be >= 8 (got {self.pixels})"),
+            (
+                self.warmup_nm is None or self.warmup_nm >= 0,
+                f"warm-up must be >= 0 nm (got {self.warmup_nm})",
+            ),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise SettingsError(msg)
+
+    @property
+    def pixel_nm(self) -> float:
+        return self.length_nm / self.pixels
+
+    def replace(self, **changes: Any) -> PhysicalSettings:
+        """Copy with some fields changed (``None`` values are ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+@dataclass(frozen=True)
+class ParameterRange:
+    """Training range of (U0, K), restricted to an eta window, sampled by Latin hypercube.
+
+    The hypercube is drawn in (U0, K) over the rectangle; points outside the eta window
+    are rejected and the draw is repeated with fresh strata until ``n`` points are kept,
+    so the kept points are uniform over the allowed region.
+    """
+
+    U0_eV: tuple[float, float] = (0.3, 6.0)
+    K_N_m: tuple[float, float] = (1.0, 50.0)
+    eta: tuple[float, float] = (1.2, 40.0)
+
+    def __post_init__(self) -> None:
+        (u_lo, u_hi), (k_lo, k_hi), (e_lo, e_hi) = self.U0_eV, self.K_N_m, self.eta
+        if not (0 <= u_lo <= u_hi):
+            raise SettingsError(f"bad U0 range {self.U0_eV} eV")
+        if not (0 < k_lo <= k_hi):
+            raise SettingsError(f"bad K range {self.K_N_m} N/m (K must be > 0)")
+        if not (0 <= e_lo <= e_hi):
+            raise SettingsError(f"bad eta range {self.eta}")
+
+    def check_feasible(self, lattice_nm: float) -> None:
+        """Raise :class:`SettingsError` if no (U0, K) in the box has eta in the window."""
+        (u_lo, u_hi), (k_lo, k_hi), (e_lo, e_hi) = self.U0_eV, self.K_N_m, self.eta
+        eta_min = float(eta_from(u_lo, k_hi, lattice_nm))
+        eta_max = float(eta_from(u_hi, k_lo, lattice_nm))
+        if eta_max < e_lo or eta_min > e_hi:
+            raise SettingsError(
+                f"no eta in [{e_lo:g}, {e_hi:g}] inside U0 {self.U0_eV} eV x K {self.K_N_m} N/m "
+                f"(eta spans [{eta_min:.3g}, {eta_max:.3g}] there at a = {lattice_nm:g} nm)"
+            )
+
+
+@dataclass(frozen=True)
+class SubstrateAugmentation:
+    """Ranges of the augmented substrate of the reference paper (off by default).
+
+    The potential becomes
+    ``U(x) = -(U0/2) [1 + A cos(2 pi x / lambda + phi)] cos(2 pi x / a)
+    + sum_j h_j U0 exp(-(x - x_j)^2 / (2 w_j^2))``:
+    a long-wavelength multiplicative modulation of the barrier and localised Gaussian
+    defects whose heights are in units of U0. Each trajectory draws its own values.
+    """
+
+    modulation_amplitude: tuple[float, float] = (0.0, 0.0)
+    modulation_wavelength_nm: tuple[float, float] = (5.0, 30.0)
+    defects_per_line: tuple[int, int] = (0, 0)
+    defect_height: tuple[float, float] = (-0.3, 0.3)
+    defect_width_nm: tuple[float, float] = (0.1, 0.5)
+
+    @property
+    def enabled(self) -> bool:
+        return self.modulation_amplitude[1] > 0 or self.defects_per_line[1] > 0
+
+
+#: The substrate of a typical laboratory sample: every line's barrier modulated, up to
+#: three defects (the test bench's; see also ``randomised.lab_config``).
+LAB_SUBSTRATE = SubstrateAugmentation(
+    modulation_amplitude=(0.0, 0.3),
+    modulation_wavelength_nm=(4.0, 30.0),
+    defects_per_line=(0, 3),
+    defect_height=(-0.3, 0.3),
+    defect_width_nm=(0.1, 0.5),
+)
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Everything needed to regenerate a dataset from its file alone."""
+
+    physics: PhysicalSettings = field(default_factory=PhysicalSettings)
+    ranges: ParameterRange = field(default_factory=ParameterRange)
+    augmentation: SubstrateAugmentation = field(default_factory=SubstrateAugmentation)
+    n: int = 1600
+    seed: int = 0
+    preset: str = "paper"
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> SweepConfig:
+        d = json.loads(text)
+        return cls(
+            physics=PhysicalSettings(**d["physics"]),
+            ranges=ParameterRange(**{k: tuple(v) for k, v in d["ranges"].items()}),
+            augmentation=SubstrateAugmentation(
+                **{k: tuple(v) for k, v in d["augmentation"].items()}
+            ),
+            n=d["n"],
+            seed=d["seed"],
+            preset=d["preset"],
+        )
+
+
+PRESETS: dict[str, PhysicalSettings] = {
+    "paper": PhysicalSettings(),
+    # the reference paper's experiments: ~30 nm/s on MoS2 / WS2
+    "mos2": PhysicalSettings(lattice_nm=0.316, velocity_nm_per_s=30.0),
+    "ws2": PhysicalSettings(lattice_nm=0.315, velocity_nm_per_s=30.0),
+}
+
+
+def warmup_nm_for(
+    U0_eV: np.ndarray, K_N_m: np.ndarray, lattice_nm: np.ndarray, warmup_nm: float | None
+) -> np.ndarray:
+    """Warm-up travel per trajectory: the given value, or ``max(1, F_max/K + 4a)`` nm."""
+    if warmup_nm is not None:
+        return np.full(np.shape(U0_eV), float(warmup_nm))
+    return np.maximum(1.0, fmax_nN(U0_eV, lattice_nm) / K_N_m + 4.0 * lattice_nm)

@@ -1,0 +1,168 @@
+"""Shared pieces of the vendor readers: the in-memory scan, channel naming, units.
+
+Every vendor reader turns a file into a :class:`ScanFile`: the images it holds
+(:class:`Channel`, in the file's own units, rows = scan lines, columns = pixels in
+increasing x) plus acquisition metadata. :mod:`stickslip.traces.formats.maps` turns
+a :class:`ScanFile` into per-line :class:`~stickslip.traces.trace.Trace` objects.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from stickslip.traces.trace import TraceReadError
+
+TRACE = "trace"
+RETRACE = "retrace"
+
+# Longest header, in bytes, that the text-header readers scan; real headers are < 100 kB.
+MAX_HEADER_BYTES = 4_000_000
+
+_LATERAL_WORDS = re.compile(r"friction|lateral|\blfm?\b|torsion", re.IGNORECASE)
+_RETRACE_WORDS = re.compile(r"retrace|backward|\bbwd\b|\bback\b", re.IGNORECASE)
+_TRACE_WORDS = re.compile(r"trace|forward|\bfwd\b", re.IGNORECASE)
+
+# Scale factors of the force units to nN and of the voltage units to V.
+_FORCE_TO_NN = {"N": 1e9, "mN": 1e6, "uN": 1e3, "µN": 1e3, "nN": 1.0, "pN": 1e-3}
+_VOLT_TO_V = {"V": 1.0, "mV": 1e-3, "uV": 1e-6, "µV": 1e-6}
+_LENGTH_TO_NM = {"m": 1e9, "mm": 1e6, "um": 1e3, "µm": 1e3, "~m": 1e3, "nm": 1.0, "pm": 1e-3,
+                 "Å": 0.1, "A": 0.1}
+
+
+@dataclass
+class Channel:
+    """One image channel of a scan.
+
+    Attributes
+    ----------
+    name : str
+        Channel name as the instrument writes it (e.g. ``"Friction"``).
+    direction : str
+        ``"trace"`` or ``"retrace"`` (``""`` if the file does not say).
+    unit : str
+        Unit of ``data`` as stored (``"V"``, ``"N"``, ``"m"`` ...).
+    shape : tuple of int
+        ``(lines, pixels)``.
+    data : ndarray, shape (lines, pixels), or None
+        Rows are scan lines in the stored order; columns run in increasing x for
+        both directions (the display order every vendor uses). ``None`` for
+        channels a reader lists but does not load (non-lateral ones).
+    """
+
+    name: str
+    direction: str
+    unit: str
+    shape: tuple[int, int]
+    data: np.ndarray | None = None
+
+    @property
+    def is_lateral(self) -> bool:
+        """True if the name marks a lateral-force (friction) channel."""
+        return is_lateral_name(self.name)
+
+
+@dataclass
+class ScanFile:
+    """Everything a vendor reader extracts from one file.
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    fmt : str
+        Human-readable format name (``"Bruker NanoScope"``...).
+    channels : list of Channel
+        All image channels, lateral or not.
+    scan_size_nm : float or None
+        Length of a scan line in nm.
+    meta : dict
+        Acquisition metadata: ``scan_rate_hz``, ``velocity_nm_per_s``, ``load``,
+        ``load_unit``, ``calibration_nN_per_V``, ``lattice_nm`` ... where known.
+    """
+
+    path: Path
+    fmt: str
+    channels: list[Channel] = field(default_factory=list)
+    scan_size_nm: float | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def lateral(self) -> list[Channel]:
+        """The lateral-force channels, in file order."""
+        return [c for c in self.channels if c.is_lateral]
+
+
+def is_lateral_name(name: str) -> bool:
+    """True if a channel name denotes lateral force / friction."""
+    return bool(_LATERAL_WORDS.search(name))
+
+
+def direction_from_name(name: str) -> str:
+    """``"retrace"``, ``"trace"`` or ``""`` from words in a channel name or title."""
+    if _RETRACE_WORDS.search(name):
+        return RETRACE
+    if _TRACE_WORDS.search(name):
+        return TRACE
+    return ""
+
+
+def base_name(name: str) -> str:
+    """The channel name without its direction words (to pair trace with retrace)."""
+    stripped = re.sub(r"[\s_\-:()\[\]]*(retrace|backward|forward|trace|fwd|bwd)[\s_\-:()\[\]]*",
+                      " ", name, flags=re.IGNORECASE)
+    return " ".join(stripped.split()) or name
+
+
+def force_scale_to_nN(unit: str) -> float | None:
+    """Factor from ``unit`` to nN, or ``None`` if ``unit`` is not a force unit."""
+    return _FORCE_TO_NN.get(unit.strip())
+
+
+def volt_scale_to_V(unit: str) -> float | None:
+    """Factor from ``unit`` to V, or ``None`` if ``unit`` is not a voltage unit."""
+    return _VOLT_TO_V.get(unit.strip())
+
+
+def length_to_nm(value: float, unit: str) -> float:
+    """Convert a length to nm; raises ValueError for an unknown unit."""
+    try:
+        return float(value) * _LENGTH_TO_NM[unit.strip()]
+    except KeyError:
+        raise ValueError(f"unknown length unit '{unit}'") from None
+
+
+def optional_import(module: str, path: Path) -> ModuleType:
+    """Import a third-party reader of the ``formats`` extra, or raise a one-line error."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise TraceReadError(
+            path,
+            f"reading {path.suffix or path.name} files needs the optional extra: "
+            "pip install 'stickslip[formats]'",
+        ) from None
+
+
+def read_bytes(path: Path, limit: int | None = None) -> bytes:
+    """Read a file (or its first ``limit`` bytes) with one-line errors."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read() if limit is None else fh.read(limit)
+    except IsADirectoryError:
+        raise TraceReadError(path, "is a directory") from None
+    except OSError as e:
+        raise TraceReadError(path, f"cannot read ({e.strerror})") from None
+
+
+def as_image(data: Any, path: Path, what: str) -> np.ndarray:
+    """A finite float 2-D array, or a one-line error naming ``what``."""
+    arr = np.asarray(data, dtype=float)
+    if arr.ndim != 2 or min(arr.shape) < 1:
+        raise TraceReadError(path, f"{what} is not a 2-D image (shape {arr.shape})")
+    return arr

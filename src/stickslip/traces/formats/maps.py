@@ -1,0 +1,422 @@
+"""From friction maps to per-line traces; friction loops; load schedules.
+
+Conventions (see docs/formats.md):
+
+- A lateral-force image with trace and retrace channels becomes one trace per scan
+  line and direction. Vendors store both images with columns in increasing x; the
+  retrace line is therefore reversed in x and sign-flipped, so that both read as
+  friction in the scan direction (positive while sliding forward, as in PHYSICS.md).
+- Positions: ``x_nm = i * scan_size_nm / pixels`` (from 0 at the first recorded
+  pixel of the line, in the scan direction).
+- Forces: a channel in newtons is converted to nN; a channel in volts is multiplied
+  by the calibration factor (nN/V) stored in the file, else the one passed as
+  ``calibration_nN_per_V``; without either it stays in volts and the trace's meta
+  says ``unit="V"``, ``calibrated=False``.
+- Friction loop of a line: ``(trace - retrace) / 2`` (both in x order, raw sign),
+  its mean is the friction, ``(trace + retrace) / 2`` the lateral offset.
+- Lines are numbered in the order the file stores them (0-based).
+
+Reader options
+--------------
+:func:`reader_options` builds the ``**options`` dict that commands pass to
+:func:`stickslip.traces.collect_traces` (and so to every reader). Keys, all optional:
+
+``calibration_nN_per_V`` (float > 0)
+    Lateral calibration used for channels in volts when the file stores none.
+``lines_per_load`` (int >= 1)
+    Consecutive lines recorded at one load; sets ``meta["load_group"]`` and, with
+    ``loads``, ``meta["load"]`` on every trace that has a ``line``.
+``loads`` (list of float)
+    Load (or setpoint) of each group of ``lines_per_load`` lines, in order.
+``load_unit`` (str)
+    Unit of ``loads`` (default ``"nN"``).
+``scan_size_nm`` (float > 0)
+    Line length for files that do not state it (text friction loops).
+``directions`` (tuple of str)
+    Which traces to emit per line, from ``"trace"``, ``"retrace"``, ``"loop"``
+    (default trace and retrace).
+
+Readers ignore options they do not use, so the same dict serves every format.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stickslip.traces.formats.common import (
+    RETRACE,
+    TRACE,
+    Channel,
+    ScanFile,
+    base_name,
+    force_scale_to_nN,
+    volt_scale_to_V,
+)
+from stickslip.traces.trace import Trace, TraceReadError
+
+LOOP = "loop"
+DIRECTIONS = (TRACE, RETRACE, LOOP)
+DEFAULT_DIRECTIONS = (TRACE, RETRACE)
+
+
+def reader_options(
+    calibration_nN_per_V: float | None = None,
+    lines_per_load: int | None = None,
+    loads: Sequence[float] | None = None,
+    *,
+    load_unit: str = "nN",
+    scan_size_nm: float | None = None,
+    directions: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """Validate command-line reading options and return them as reader ``**options``.
+
+    Parameters
+    ----------
+    calibration_nN_per_V : float, optional
+        Lateral-force calibration in nN/V, used where the file stores none.
+    lines_per_load : int, optional
+        Number of consecutive scan lines recorded at one load.
+    loads : sequence of float, optional
+        Loads (or setpoints) of the successive line groups; needs ``lines_per_load``.
+    load_unit : str
+        Unit of ``loads``.
+    scan_size_nm : float, optional
+        Scan-line length for files that do not state it.
+    directions : sequence of str, optional
+        Subset of ``("trace", "retrace", "loop")`` to emit per line.
+
+    Returns
+    -------
+    dict
+        Only the options that were given (see the module docstring for the keys).
+
+    Raises
+    ------
+    ValueError
+        With a one-line message for an invalid combination or value.
+    """
+    opts: dict[str, Any] = {}
+    if calibration_nN_per_V is not None:
+        if not (math.isfinite(calibration_nN_per_V) and calibration_nN_per_V > 0):
+            raise ValueError("calibration must be a positive number of nN per V")
+        opts["calibration_nN_per_V"] = float(calibration_nN_per_V)
+    if lines_per_load is not None:
+        if lines_per_load < 1:
+            raise ValueError("lines per load must be at least 1")
+        opts["lines_per_load"] = int(lines_per_load)
+    if loads:
+        if lines_per_load is None:
+            raise ValueError("loads need --lines-per-load (how many lines share one load)")
+        if not all(math.isfinite(v) for v in loads):
+            raise ValueError("loads must be finite numbers")
+        opts["loads"] = [float(v) for v in loads]
+        opts["load_unit"] = load_unit
+    if scan_size_nm is not None:
+        if not (math.isfinite(scan_size_nm) and scan_size_nm > 0):
+            raise ValueError("scan size must be a positive length in nm")
+        opts["scan_size_nm"] = float(scan_size_nm)
+    if directions is not None:
+        bad = [d for d in directions if d not in DIRECTIONS]
+        if bad or not directions:
+            raise ValueError(f"directions must be among {', '.join(DIRECTIONS)}")
+        opts["directions"] = tuple(directions)
+    return opts
+
+
+def friction_loop(trace_img: np.ndarray, retrace_img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Friction and lateral offset per line from a trace/retrace pair.
+
+    Parameters
+    ----------
+    trace_img, retrace_img : ndarray, shape (lines, pixels) or (pixels,)
+        Lateral signal of both directions, columns in increasing x (as stored).
+
+    Returns
+    -------
+    friction : ndarray, shape (lines,) or scalar array
+        Mean over the line of ``(trace - retrace) / 2``.
+    offset : ndarray, shape (lines,) or scalar array
+        Mean over the line of ``(trace + retrace) / 2`` (the lateral offset).
+    """
+    t = np.asarray(trace_img, dtype=float)
+    r = np.asarray(retrace_img, dtype=float)
+    if t.shape != r.shape:
+        raise ValueError(f"trace and retrace differ in shape ({t.shape} vs {r.shape})")
+    return ((t - r) / 2.0).mean(axis=-1), ((t + r) / 2.0).mean(axis=-1)
+
+
+def to_force(
+    data: np.ndarray, unit: str, calibration_nN_per_V: float | None
+) -> tuple[np.ndarray, str, bool]:
+    """Convert a lateral signal to nN where possible.
+
+    Returns
+    -------
+    force : ndarray
+        In nN if ``calibrated`` else in V.
+    unit : str
+        ``"nN"`` or ``"V"``.
+    calibrated : bool
+        True when the values are forces.
+
+    Raises
+    ------
+    ValueError
+        If ``unit`` is neither a force nor a voltage unit.
+    """
+    f = force_scale_to_nN(unit)
+    if f is not None:
+        return data * f, "nN", True
+    v = volt_scale_to_V(unit)
+    if v is None:
+        raise ValueError(f"unit '{unit}' is neither a force nor a voltage")
+    if calibration_nN_per_V is not None:
+        return data * (v * calibration_nN_per_V), "nN", True
+    return data * v, "V", False
+
+
+def pair_channels(channels: Iterable[Channel]) -> list[tuple[str, Channel | None, Channel | None]]:
+    """Pair lateral channels by name: ``(name, trace, retrace)``, in file order.
+
+    A channel whose direction is unknown counts as a trace.
+    """
+    pairs: dict[str, list[Channel | None]] = {}
+    for ch in channels:
+        slot = pairs.setdefault(base_name(ch.name), [None, None])
+        i = 1 if ch.direction == RETRACE else 0
+        if slot[i] is None:
+            slot[i] = ch
+    return [(name, t, r) for name, (t, r) in pairs.items()]
+
+
+def map_to_traces(
+    scan: ScanFile,
+    calibration_nN_per_V: float | None = None,
+    directions: Sequence[str] = DEFAULT_DIRECTIONS,
+    scan_size_nm: float | None = None,
+    **_: Any,
+) -> list[Trace]:
+    """Turn the lateral-force images of a scan into one trace per line and direction.
+
+    Parameters
+    ----------
+    scan : ScanFile
+        What a vendor reader extracted.
+    calibration_nN_per_V : float, optional
+        Used for channels in volts when ``scan.meta`` has no ``calibration_nN_per_V``.
+    directions : sequence of str
+        Which of ``"trace"``, ``"retrace"``, ``"loop"`` to emit.
+    scan_size_nm : float, optional
+        Used when the file does not state the scan size; without either, positions
+        are pixel indices and ``meta["x_unit"]`` is ``"px"``.
+
+    Returns
+    -------
+    list of Trace
+        Named ``<stem>:<channel>:<direction>:L<line>``, with provenance in ``meta``.
+
+    Raises
+    ------
+    TraceReadError
+        If the scan has no usable lateral-force image.
+    """
+    path = scan.path
+    lateral = [c for c in scan.lateral() if c.data is not None]
+    if not lateral:
+        found = ", ".join(f"{c.name} ({c.direction or '?'})" for c in scan.channels)
+        found = f"found: {found}" if found else "no image channels: a force curve or spectrum?"
+        raise TraceReadError(path, f"no lateral-force image channels ({found})")
+    cal = scan.meta.get("calibration_nN_per_V") or calibration_nN_per_V
+    size = scan.scan_size_nm or scan_size_nm
+    traces: list[Trace] = []
+    for name, tr, rt in pair_channels(lateral):
+        images: dict[str, np.ndarray] = {}
+        unit, calibrated = "V", False
+        for direction, ch in ((TRACE, tr), (RETRACE, rt)):
+            if ch is None or ch.data is None:
+                continue
+            try:
+                images[direction], unit, calibrated = to_force(ch.data, ch.unit, cal)
+            except ValueError as e:
+                raise TraceReadError(path, f"channel {ch.name}: {e}") from None
+        traces.extend(_line_traces(scan, name, images, unit, calibrated, size, directions))
+    if not traces:
+        raise TraceReadError(path, "no traces for the requested directions")
+    return traces
+
+
+def _line_traces(
+    scan: ScanFile,
+    channel: str,
+    images: Mapping[str, np.ndarray],
+    unit: str,
+    calibrated: bool,
+    size_nm: float | None,
+    directions: Sequence[str],
+) -> list[Trace]:
+    first = next(iter(images.values()))
+    n_lines, n_px = first.shape
+    if TRACE in images and RETRACE in images and images[TRACE].shape != images[RETRACE].shape:
+        raise TraceReadError(scan.path, f"channel {channel}: trace and retrace differ in shape")
+    x = np.arange(n_px, dtype=float) * (size_nm / n_px if size_nm else 1.0)
+    loops = None
+    if TRACE in images and RETRACE in images:
+        loops = friction_loop(images[TRACE], images[RETRACE])
+    base_meta = {
+        "file": str(scan.path),
+        "format": scan.fmt,
+        "channel": channel,
+        "unit": unit,
+        "calibrated": calibrated,
+        "scan_size_nm": size_nm,
+        "x_unit": "nm" if size_nm else "px",
+        "load": scan.meta.get("load"),
+        "load_unit": scan.meta.get("load_unit"),
+    }
+    base_meta.update({k: v for k, v in scan.meta.items() if k not in base_meta})
+    width = max(3, len(str(n_lines - 1)))
+    stem = Path(scan.path).stem
+    out: list[Trace] = []
+    for line in range(n_lines):
+        rows = {
+            TRACE: images[TRACE][line] if TRACE in images else None,
+            RETRACE: -images[RETRACE][line][::-1] if RETRACE in images else None,
+            LOOP: (images[TRACE][line] - images[RETRACE][line]) / 2 if loops is not None else None,
+        }
+        for direction in directions:
+            f = rows.get(direction)
+            if f is None:
+                continue
+            meta = dict(base_meta, direction=direction, line=line)
+            if loops is not None:
+                meta["loop_friction"] = float(loops[0][line])
+                meta["loop_offset"] = float(loops[1][line])
+            out.append(
+                Trace(
+                    x_nm=x.copy(),
+                    force_nN=np.ascontiguousarray(f, dtype=float),
+                    name=f"{stem}:{channel}:{direction}:L{line:0{width}d}",
+                    source=str(scan.path),
+                    meta=meta,
+                )
+            )
+    return out
+
+
+def assign_loads(
+    traces: Sequence[Trace],
+    lines_per_load: int,
+    loads: Sequence[float] | None = None,
+    load_unit: str = "nN",
+) -> list[Trace]:
+    """Group lines by load: set ``load_group`` (and ``load``) in each trace's meta.
+
+    Line ``i`` belongs to group ``i // lines_per_load``; with ``loads`` its load is
+    ``loads[group]``. Traces without a ``line`` in their meta are left unchanged.
+    The traces are modified in place and returned.
+
+    Raises
+    ------
+    ValueError
+        If a line's group has no entry in ``loads``.
+    """
+    if lines_per_load < 1:
+        raise ValueError("lines per load must be at least 1")
+    for t in traces:
+        line = t.meta.get("line")
+        if not isinstance(line, int):
+            continue
+        group = line // lines_per_load
+        t.meta["load_group"] = group
+        if loads is not None:
+            if group >= len(loads):
+                raise ValueError(
+                    f"line {line} is in load group {group + 1} but only {len(loads)} "
+                    f"loads were given"
+                )
+            t.meta["load"] = float(loads[group])
+            t.meta["load_unit"] = load_unit
+    return list(traces)
+
+
+def apply_load_schedule(
+    traces: list[Trace], path: str | os.PathLike, **options: Any
+) -> list[Trace]:
+    """Apply ``lines_per_load``/``loads`` reader options, with one-line errors."""
+    n = options.get("lines_per_load")
+    if not n:
+        return traces
+    try:
+        return assign_loads(traces, n, options.get("loads"), options.get("load_unit", "nN"))
+    except ValueError as e:
+        raise TraceReadError(path, str(e)) from None
+
+
+def _load_of(row: Any) -> Any:
+    meta = row.meta if isinstance(row, Trace) else row
+    return meta.get("load")
+
+
+def group_by_load(rows: Iterable[Any]) -> list[tuple[float | None, list[Any]]]:
+    """Group result rows (mappings with a ``load`` key, or traces) by load.
+
+    Returns
+    -------
+    list of (load, rows)
+        Sorted by increasing load; rows without a load come last, under ``None``.
+    """
+    groups: dict[float | None, list[Any]] = {}
+    for row in rows:
+        load = _load_of(row)
+        key = None if load is None or (isinstance(load, float) and math.isnan(load)) else load
+        groups.setdefault(key, []).append(row)
+    return sorted(groups.items(), key=lambda kv: (kv[0] is None, kv[0] if kv[0] is not None else 0))
+
+
+def summarise_by_load(rows: Iterable[Mapping[str, Any]], keys: Sequence[str]) -> list[dict]:
+    """Mean, standard deviation and count of numeric ``keys`` per load group.
+
+    Returns
+    -------
+    list of dict
+        One per group: ``load``, ``load_unit``, ``n`` and ``<key>_mean``, ``<key>_std``.
+    """
+    out = []
+    for load, group in group_by_load(rows):
+        unit = group[0].get("load_unit")
+        rec: dict[str, Any] = {"load": load, "load_unit": unit, "n": len(group)}
+        for k in keys:
+            vals = np.array([float(r[k]) for r in group if r.get(k) is not None], dtype=float)
+            vals = vals[np.isfinite(vals)]
+            rec[f"{k}_mean"] = float(vals.mean()) if vals.size else math.nan
+            rec[f"{k}_std"] = float(vals.std(ddof=1)) if vals.size > 1 else math.nan
+        out.append(rec)
+    return out
+
+
+def parse_loads(text: str | None) -> list[float] | None:
+    """Parse a comma-separated list of loads (``"10,8,6"``); ``None`` or empty gives None.
+
+    Raises
+    ------
+    ValueError
+        With a one-line message naming the bad entry.
+    """
+    if not text or not text.strip():
+        return None
+    out = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            raise ValueError(f"bad load '{part.strip()}' (expected numbers like 10,8,6)") from None
+        if not math.isfinite(v):
+            raise ValueError(f"bad load '{part.strip()}' (not finite)")
+        out.append(v)
+    return out

@@ -1,0 +1,199 @@
+"""Plain-text and NumPy traces: column layouts, volts with calibration, friction loops.
+
+Recognised column layouts (header names, any order; comma, tab, semicolon or
+whitespace separated; ``#`` lines are comments):
+
+- ``x_nm,force_nN``: one trace in nN (the project's own format).
+- ``x_nm,force_V``: one trace in volts; converted with ``calibration_nN_per_V``,
+  else kept in volts and flagged (``meta["unit"] == "V"``, ``calibrated=False``).
+- ``trace,retrace`` (volts; or ``trace_V,retrace_V``, ``trace_nN,retrace_nN``),
+  optionally with ``x_nm`` or ``index``: one friction loop, read as one scan line
+  (trace, retrace reversed and sign-flipped, see :mod:`.maps`).
+- No header, three numeric columns ``index, trace, retrace`` in volts (the layout
+  of exported friction profiles such as ``exampleFrictionProfileFull.txt``).
+
+``.npy``: a structured array with the same field names; a plain ``(n, 2)`` array
+``x_nm, force_nN``; or a 1-D array of forces in nN (positions from ``scan_size_nm``,
+else pixel indices).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stickslip.traces.formats.common import RETRACE, TRACE, Channel, ScanFile, read_bytes
+from stickslip.traces.formats.maps import map_to_traces, to_force
+from stickslip.traces.trace import Trace, TraceReadError, validate_trace
+
+NEEDED = "needs columns x_nm,force_nN (or x_nm,force_V, or trace,retrace)"
+FORMAT_LOOP = "friction loop (text)"
+_LOOP_COLS = {TRACE: ("trace", "trace_V", "trace_mV", "trace_nN"),
+              RETRACE: ("retrace", "retrace_V", "retrace_mV", "retrace_nN")}
+_FORCE_COLS = {"force_nN": "nN", "force_V": "V", "force_mV": "mV"}
+_X_COLS = {"x_nm": 1.0, "x_um": 1e3}
+
+
+def _split(line: str) -> list[str]:
+    for sep in (",", "\t", ";"):
+        if sep in line:
+            return next(csv.reader(io.StringIO(line), delimiter=sep))
+    return line.split()
+
+
+def read_rows(path: Path) -> list[list[str]]:
+    """Non-empty, non-comment rows of a delimited text file, with one-line errors."""
+    raw = read_bytes(path)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise TraceReadError(path, "not a text file") from None
+    if "\x00" in text:
+        raise TraceReadError(path, "not a text file")
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    rows = [_split(ln) for ln in lines]
+    rows = [[c.strip() for c in r] for r in rows if any(c.strip() for c in r)]
+    if not rows:
+        raise TraceReadError(path, "empty file")
+    return rows
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _numbers(rows: Sequence[Sequence[str]], ncol: int, path: Path) -> np.ndarray:
+    try:
+        data = np.array([[float(v) for v in r[:ncol]] for r in rows], dtype=float)
+    except ValueError as e:
+        raise TraceReadError(path, f"non-numeric value ({e})") from None
+    if any(len(r) < ncol for r in rows):
+        raise TraceReadError(path, "missing value (a row is shorter than the header)")
+    return data.reshape(-1, ncol)
+
+
+def read_text(path: Path, **options: Any) -> list[Trace]:
+    """Read the traces of a CSV/TXT file in any recognised layout."""
+    rows = read_rows(path)
+    if all(_is_number(c) for c in rows[0]):
+        if len(rows[0]) != 3:
+            raise TraceReadError(
+                path, f"{NEEDED}; a file without header must have 3 columns index,trace,retrace"
+            )
+        data = _numbers(rows, 3, path)
+        return traces_from_columns(path, ["index", "trace", "retrace"], data, **options)
+    header = rows[0]
+    return traces_from_columns(path, header, _numbers(rows[1:], len(header), path), **options)
+
+
+def _unit_of(name: str) -> str:
+    return name.split("_", 1)[1] if "_" in name else "V"
+
+
+def _one(header: Sequence[str], choices: Sequence[str], path: Path, what: str) -> str | None:
+    found = [c for c in choices if c in header]
+    if len(found) > 1:
+        raise TraceReadError(path, f"mixed units: several {what} columns ({', '.join(found)})")
+    return found[0] if found else None
+
+
+def traces_from_columns(
+    path: Path, header: Sequence[str], data: np.ndarray, **options: Any
+) -> list[Trace]:
+    """Traces from named numeric columns (``data`` has one column per header name).
+
+    Raises
+    ------
+    TraceReadError
+        If no layout matches (the reason names the needed columns), on mixed units,
+        or if the values do not form a valid trace.
+    """
+    header = [h.strip() for h in header]
+    xcol = _one(header, tuple(_X_COLS), path, "position")
+    fcol = _one(header, tuple(_FORCE_COLS), path, "force")
+    tcol = _one(header, _LOOP_COLS[TRACE], path, "trace")
+    rcol = _one(header, _LOOP_COLS[RETRACE], path, "retrace")
+    col = {h: data[:, i] for i, h in enumerate(header)}
+    if fcol and (tcol or rcol):
+        raise TraceReadError(path, "ambiguous layout: both force and trace/retrace columns")
+    if tcol and rcol:
+        if _unit_of(tcol) != _unit_of(rcol):
+            raise TraceReadError(path, f"mixed units: {tcol} and {rcol}")
+        x = col[xcol] * _X_COLS[xcol] if xcol else None
+        return _loop_traces(path, col[tcol], col[rcol], _unit_of(tcol), x, **options)
+    if fcol and (xcol or len(header) == 1):
+        x = col[xcol] * _X_COLS[xcol] if xcol else _positions(data.shape[0], options)
+        return [_single_trace(path, x, col[fcol], _FORCE_COLS[fcol], options)]
+    raise TraceReadError(path, f"{NEEDED} (found {','.join(header)})")
+
+
+def _positions(n: int, options: dict[str, Any]) -> np.ndarray:
+    size = options.get("scan_size_nm")
+    return np.arange(n, dtype=float) * (size / n if size else 1.0)
+
+
+def _single_trace(
+    path: Path, x: np.ndarray, f: np.ndarray, unit: str, options: dict[str, Any]
+) -> Trace:
+    force, out_unit, calibrated = to_force(f, unit, options.get("calibration_nN_per_V"))
+    x, force = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(force, dtype=float)
+    validate_trace(x, force, str(path))
+    meta = {"file": str(path), "unit": out_unit, "calibrated": calibrated}
+    return Trace(x_nm=x, force_nN=force, name=path.stem, source=str(path), meta=meta)
+
+
+def _loop_traces(
+    path: Path,
+    trace: np.ndarray,
+    retrace: np.ndarray,
+    unit: str,
+    x: np.ndarray | None,
+    **options: Any,
+) -> list[Trace]:
+    n = trace.size
+    size = None
+    if x is not None:
+        dx = np.diff(x)
+        if n < 2 or np.any(dx <= 0) or not np.all(np.isfinite(x)):
+            raise TraceReadError(path, "x_nm is not strictly increasing")
+        size = float(np.median(dx) * n)
+    scan = ScanFile(path=path, fmt=FORMAT_LOOP, scan_size_nm=size)
+    for direction, values in ((TRACE, trace), (RETRACE, retrace)):
+        scan.channels.append(Channel("Friction", direction, unit, (1, n), values[None, :].copy()))
+    traces = map_to_traces(scan, **options)
+    for t in traces:
+        validate_trace(t.x_nm, t.force_nN, str(path))
+    return traces
+
+
+def read_npy(path: Path, **options: Any) -> list[Trace]:
+    """Read a ``.npy`` trace (structured, ``(n, 2)`` or 1-D; see the module docstring)."""
+    head = read_bytes(path, 6)
+    if head != b"\x93NUMPY":
+        raise TraceReadError(path, "not a NumPy .npy file (bad magic)")
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise TraceReadError(path, f"damaged .npy file ({e})") from None
+    if arr.dtype.names:
+        names = list(arr.dtype.names)
+        data = np.column_stack([np.asarray(arr[n], dtype=float).ravel() for n in names])
+        return traces_from_columns(path, names, data, **options)
+    if arr.dtype.kind not in "fiu":
+        raise TraceReadError(path, f"array of {arr.dtype} is not numeric")
+    if arr.ndim == 1:
+        return traces_from_columns(path, ["force_nN"], arr.astype(float)[:, None], **options)
+    if arr.ndim == 2 and arr.shape[1] == 2:
+        return traces_from_columns(path, ["x_nm", "force_nN"], arr.astype(float), **options)
+    raise TraceReadError(
+        path, f"array of shape {arr.shape}: expected (n,) forces or (n, 2) x_nm, force_nN"
+    )

@@ -1,0 +1,137 @@
+"""Classical estimator: PT inversion, slip detection, thermal correction, real data."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stickslip.estimators.classical import analyse_trace, estimate_array, estimate_trace
+from stickslip.estimators.classical import estimator as E
+from stickslip.estimators.classical.pt_inversion import expected_peak, k_from_segment
+from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.simulate import simulate
+from stickslip.units import eta_from, fmax_nN
+
+SHARED_DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
+MACRO = SHARED_DATA / "macro-stickslip" / "k1002Nm_v42.mat"
+A = 0.246
+
+
+def _range_sample(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(U0, K) uniform over the default range with 1.5 <= eta <= 40."""
+    rng = np.random.default_rng(seed)
+    U, K = rng.uniform(0.3, 6.0, 20 * n), rng.uniform(1.0, 50.0, 20 * n)
+    e = eta_from(U, K, A)
+    keep = (e >= 1.5) & (e <= 40)
+    return U[keep][:n], K[keep][:n]
+
+
+def _rel_errors(U: np.ndarray, K: np.ndarray, T: float, seed: int) -> tuple[np.ndarray, ...]:
+    r = simulate(U, K, PhysicalSettings(), seed=seed, temperature_K=T)
+    est = estimate_array(r.x_nm, r.force_nN, temperature_K=T)
+    assert np.all(est[:, E.STATUS] == 0)
+    return np.abs(est[:, E.U0] / U - 1), np.abs(est[:, E.K_] / K - 1)
+
+
+def test_branch_secant_is_exact():
+    # a stick segment of the analytic branch F = Fmax sin th, X = (a/2pi) th + F/K
+    U0, K = 2.0, 20.0
+    Fmax = float(fmax_nN(U0, A))
+    th = np.array([-0.8, 1.2])
+    F = Fmax * np.sin(th)
+    X = A / (2 * np.pi) * th + F / K
+    k_sec = (F[1] - F[0]) / (X[1] - X[0])
+    assert k_from_segment(k_sec, F[0], F[1], Fmax, A) == pytest.approx(K, rel=1e-9)
+
+
+def test_thermal_peak_lowers_with_temperature():
+    Fmax, K = float(fmax_nN(1.0, A)), 10.0
+    assert expected_peak(Fmax, K, 0.0, A, 0.0, 60.0, 1e-12, 1e7) == Fmax
+    peaks = [expected_peak(Fmax, K, 0.0, A, T, 60.0, 1e-12, 1e7) for T in (50, 150, 296, 600)]
+    assert np.all(np.diff(peaks) < 0) and peaks[0] < Fmax
+    # faster scans leave less time for activation: the peak rises with velocity
+    assert expected_peak(Fmax, K, 0.0, A, 296, 6000.0, 1e-12, 1e7) > peaks[2]
+
+
+def test_zero_temperature_traces_invert_within_2_percent():
+    U = np.array([1.0, 2.0, 3.0, 1.5, 4.5, 2.0])
+    K = np.array([5.0, 10.0, 15.0, 5.0, 20.0, 20.0])  # eta 10.5 ... 15.7, and 5.2
+    dU, dK = _rel_errors(U, K, 0.0, seed=1)
+    assert dU[:5].max() < 0.025 and dK[:5].max() < 0.025
+    # lower eta: the T = 0 branch bends over within the last pixel before the slip
+    assert dU[5] < 0.04 and dK[5] < 0.04
+
+
+def test_296K_accuracy_small_sample():
+    U, K = _range_sample(16, seed=11)
+    dU, dK = _rel_errors(U, K, 296.0, seed=2)
+    assert np.median(dU) < 0.05 and np.median(dK) < 0.05
+    assert dU.max() < 0.25 and dK.max() < 0.25
+
+
+@pytest.mark.slow
+def test_296K_accuracy_targets():
+    U, K = _range_sample(80, seed=12)
+    dU, dK = _rel_errors(U, K, 296.0, seed=3)
+    for d in (dU, dK):
+        assert np.median(d) <= 0.05 and np.percentile(d, 95) <= 0.15
+
+
+def _sawtooth(slip_x: np.ndarray, k: float, drops, n: int = 2048, L: float = 20.0):
+    """Stick slope k, instantaneous drops at slip_x, pixel-averaged (8 sub-samples)."""
+    X = (np.arange(n * 8) + 0.5) * (L / (n * 8))
+    cum = np.concatenate([[0.0], np.cumsum(np.broadcast_to(drops, slip_x.shape))])
+    F = k * X - cum[np.searchsorted(slip_x, X)]
+    return np.arange(n) * (L / n), F.reshape(n, 8).mean(1)
+
+
+def test_slips_need_not_be_one_lattice_apart():
+    rng = np.random.default_rng(0)
+    spacing = rng.choice([0.3, 0.6, 0.9], size=40)  # irregular, multiples of nothing
+    slip_x = np.cumsum(spacing) + 0.1
+    slip_x = slip_x[slip_x < 19.5]
+    # each slip gives back what its stick gained (steady state)
+    x, F = _sawtooth(slip_x, k=8.0, drops=8.0 * spacing[: slip_x.size])
+    F += rng.normal(0, 0.02, F.size) + 0.05 * x  # noise and a slow drift
+    an = analyse_trace(x, F)
+    assert an.n_slips == slip_x.size
+    est = estimate_trace(x, F, temperature_K=0)
+    assert est.k_exp_N_m == pytest.approx(8.05, rel=0.03)
+
+
+def test_smooth_sliding_is_flagged():
+    r = simulate([0.3], [40.0], PhysicalSettings(), seed=0, temperature_K=0.0)  # eta 0.39
+    est = estimate_trace(r.x_nm, r.force_nN[0], temperature_K=0)
+    assert est.quality == "smooth sliding" and est.regime == "smooth"
+    assert np.isnan(est.U0_eV)
+
+
+def test_too_few_slips_and_too_noisy():
+    x, F = _sawtooth(np.array([5.0, 12.0]), k=2.0, drops=4.0, n=256)
+    assert estimate_trace(x, F, temperature_K=0).quality == "too few slips"
+    rng = np.random.default_rng(1)
+    noise = estimate_trace(np.arange(512.0), rng.normal(0, 1, 512), temperature_K=0)
+    assert noise.quality == "too noisy" and noise.n_slips == 0
+
+
+@pytest.fixture
+def macro() -> tuple[np.ndarray, np.ndarray]:
+    if not MACRO.is_file():
+        pytest.skip(f"real data missing: {MACRO} (clone shared/ beside the project)")
+    from scipy.io import loadmat
+
+    d = loadmat(MACRO)
+    t, fnorm = d["t"].ravel(), d["Fnorm"].ravel()
+    # x = v t with v = 42 um/s, F = Fnorm m g: in nm and nN the slope is in N/m
+    x_nm = 42e3 * (t - t[0])
+    F_nN = fnorm * 0.0307 * 9.81 * 1e9
+    return x_nm[:200_000], F_nN[:200_000]
+
+
+def test_real_macro_stick_slope_is_the_spring(macro):
+    x, F = macro
+    est = estimate_trace(x, F, temperature_K=0)
+    assert est.quality == "ok" and est.n_slips > 50
+    assert est.k_exp_N_m == pytest.approx(1002.0, rel=0.10)

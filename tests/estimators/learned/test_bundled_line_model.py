@@ -1,0 +1,51 @@
+"""The bundled line model on freshly simulated traces unlike its training set."""
+
+import numpy as np
+import pytest
+
+from stickslip.diagnostics.calibration import coverage
+from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.modelfile import load_line_model
+from stickslip.simulators import simulate
+from stickslip.simulators.bench import BenchConfig, make_bench
+from stickslip.simulators.config import ParameterRange
+from stickslip.simulators.sampling import sample_parameters
+from stickslip.traces.dataset import load_dataset
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_line_model(None)
+
+
+def test_bench_like_traces(model, tmp_path_factory):
+    # lab effects, three lattices, 30 nm/s; seed disjoint from training and the bench
+    path = make_bench(BenchConfig(n_per_material=15, seed=777),
+                      tmp_path_factory.mktemp("b") / "b.h5", progress=False)  # fmt: skip
+    d = load_dataset(path)
+    p = d.params
+    pred = predict_raw_lines(model, [d.x_nm] * d.n, list(d.force_nN.astype(float)),
+                             p["lattice_nm"], p["velocity_nm_per_s"])  # fmt: skip
+    rel = {k: np.sqrt(np.mean((pred.values[k] / p[k] - 1) ** 2)) for k in ("U0_eV", "K_N_m")}
+    # bench (600 traces): 6.1 % and 3.9 %, <F> 0.021 nN; these 45: 5.7 %, 3.1 %, 0.021 nN
+    assert rel["U0_eV"] < 0.09 and rel["K_N_m"] < 0.07, rel
+    assert np.sqrt(np.mean((pred.values["F_mean_nN"] - p["F_mean_nN"]) ** 2)) < 0.04
+    for k in ("U0_eV", "K_N_m"):
+        assert coverage(p[k], pred.lo95[k], pred.hi95[k]) >= 0.85
+
+
+def test_clean_paper_traces(model):
+    U0, K = sample_parameters(ParameterRange(eta=(1.5, 40.0)), 40, seed=99, lattice_nm=0.246)
+    r = simulate(U0, K, seed=99)
+    n = U0.size
+    pred = predict_raw_lines(model, [r.x_nm] * n, list(r.force_nN), np.full(n, 0.246),
+                             np.full(n, 60.0))  # fmt: skip
+    # 290 clean traces (lab bench): 0.010 eV, 0.07 N/m (0.4 % and 0.6 %); these 40:
+    # 0.0095 eV, and 0.975 of U0 inside the 95 % intervals. The learning issue's figure
+    # is 0.0145 eV; the model trained with one beta for means and variances got 0.017
+    # here, the one before it 0.028.
+    assert model.expert is not None
+    assert np.sqrt(np.mean((pred.values["U0_eV"] - U0) ** 2)) < 0.0145
+    assert np.sqrt(np.mean((pred.values["K_N_m"] / K - 1) ** 2)) < 0.015
+    assert np.sqrt(np.mean((pred.values["K_N_m"] - K) ** 2)) < 0.2
+    assert coverage(U0, pred.lo95["U0_eV"], pred.hi95["U0_eV"]) >= 0.9

@@ -1,0 +1,83 @@
+"""Draws of domain-randomised training sets (no simulation needed)."""
+
+import json
+
+import numpy as np
+
+from stickslip.simulators.bench import BenchConfig
+from stickslip.simulators.config import LAB_SUBSTRATE
+from stickslip.simulators.randomised import (
+    A_REF_NM,
+    RandomisedConfig,
+    cache_path,
+    draw_randomised,
+    lab_config,
+)
+from stickslip.units import eta_from
+
+
+def test_reference_fraction_puts_lines_exactly_on_the_reference_lattice():
+    cfg = RandomisedConfig(n=4000, seed=7, reference_fraction=0.3)
+    t, _ = draw_randomised(cfg)
+    on_ref = t["lattice_nm"] == A_REF_NM
+    assert abs(on_ref.mean() - 0.3) < 0.03
+    lo, hi = cfg.lattice_nm
+    assert np.all((t["lattice_nm"][~on_ref] >= lo) & (t["lattice_nm"][~on_ref] <= hi))
+    # eta is drawn in the reference frame and kept when a line moves to another lattice
+    assert np.all((t["eta"] >= cfg.ranges.eta[0] * 0.999) & (t["eta"] <= cfg.ranges.eta[1] * 1.001))
+    assert np.allclose(t["eta"], eta_from(t["U0_eV"], t["K_N_m"], t["lattice_nm"]))
+
+
+def test_reference_fraction_leaves_the_other_draws_unchanged():
+    a, _ = draw_randomised(RandomisedConfig(n=500, seed=3, reference_fraction=0.0))
+    b, _ = draw_randomised(RandomisedConfig(n=500, seed=3, reference_fraction=0.4))
+    moved = b["lattice_nm"] != a["lattice_nm"]
+    assert 0.3 < moved.mean() < 0.5
+    for k in ("K_N_m", "velocity_nm_per_s", "mod_amplitude", "defect_count"):
+        assert np.array_equal(a[k], b[k])
+    assert np.array_equal(a["U0_eV"][~moved], b["U0_eV"][~moved])
+
+
+def test_clean_fraction_gives_flat_substrates():
+    t, sub = draw_randomised(RandomisedConfig(n=2000, seed=11, clean_fraction=0.25))
+    flat = (t["mod_amplitude"] == 0) & (t["defect_count"] == 0)
+    assert 0.2 < flat.mean() < 0.35
+    assert np.all(sub.defect_height[flat] == 0)
+
+
+def test_config_round_trips_through_json():
+    cfg = RandomisedConfig(n=10, seed=1)
+    assert json.loads(cfg.to_json())["reference_fraction"] == cfg.reference_fraction
+
+
+def test_config_read_back_from_json_including_older_files():
+    cfg = RandomisedConfig(n=10, seed=1)
+    assert RandomisedConfig.from_json(cfg.to_json()) == cfg
+    old = json.loads(cfg.to_json())
+    del old["reference_fraction"]  # a file written before the field existed
+    back = RandomisedConfig.from_json(json.dumps(old))
+    assert back.reference_fraction == 0.0 and back.ranges == cfg.ranges
+
+
+def test_lab_config_draws_every_line_on_the_laboratory_substrate():
+    cfg = lab_config(400, 9)
+    assert cfg.substrate == LAB_SUBSTRATE == BenchConfig().substrate
+    table, sub = draw_randomised(cfg)
+    lo, hi = LAB_SUBSTRATE.modulation_amplitude
+    assert np.all((table["mod_amplitude"] > lo) & (table["mod_amplitude"] <= hi))
+    assert table["defect_count"].max() == LAB_SUBSTRATE.defects_per_line[1]
+    assert np.all(np.abs(sub.defect_height) <= LAB_SUBSTRATE.defect_height[1])
+    # the training sets' parameters, lattices and velocities
+    broad, _ = draw_randomised(RandomisedConfig(n=400, seed=9))
+    for k in ("U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s"):
+        np.testing.assert_array_equal(table[k], broad[k])
+
+
+def test_cache_path_keeps_sets_of_other_settings_apart():
+    plain = cache_path(RandomisedConfig(n=400, seed=9), "w")
+    assert plain.name == "randomised_400_9.h5"  # the training sets' names stay as they were
+    others = {cache_path(c, "w") for c in (lab_config(400, 9),
+                                           RandomisedConfig(n=400, seed=9, reference_fraction=0.0))}
+    assert plain not in others and len(others) == 2
+    assert all(p.name.startswith("randomised_400_9_") for p in others)
+    assert cache_path(lab_config(400, 9), "w") == cache_path(lab_config(400, 9), "w")
