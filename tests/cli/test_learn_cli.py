@@ -43,10 +43,17 @@ def test_infer_reports_bad_files_and_processes_the_rest(traces, tmp_path):
     assert len(errs) == 3 and "Traceback" not in r.output
     assert any("garbage.csv" in e for e in errs) and any("missing.csv" in e for e in errs)
     assert any("short" in e and "too short" in e for e in errs)
-    rows = list(csv.DictReader(out.open()))
+    every = list(csv.DictReader(out.open()))
+    # one row per input: estimates for the good ones, the reason for the others
+    assert {row["trace"]: row["quality"] for row in every if row["quality"] != "ok"}.keys() == {
+        "short", "garbage", "missing"}
+    assert all(row["U0_eV"] == "" for row in every if row["quality"] != "ok")
+    rows = [row for row in every if row["quality"] == "ok"]
     assert [row["trace"] for row in rows] == ["good0", "good1"]
-    for col in ("F_mean_nN", "U0_eV", "K_N_m", "eta", "U0_eV_std", "K_N_m_std", "n_windows"):
+    for col in ("F_mean_nN", "U0_eV", "K_N_m", "eta", "U0_eV_std", "K_N_m_std", "U0_eV_lo95"):
         assert col in rows[0]
+    # the line model's rows carry no window-model columns (they would be empty)
+    assert "n_windows" not in rows[0] and "F_mean_net" not in rows[0]
     assert abs(float(rows[0]["U0_eV"]) - 1.0) < 0.3 and abs(float(rows[1]["K_N_m"]) - 20) < 4
     assert len(list((tmp_path / "plots").glob("*.png"))) == 2
 
@@ -59,7 +66,9 @@ def test_infer_empty_argument_is_reported_not_read_as_the_current_folder(
     r = _run(["infer", "good0.csv", "", "--out", out])
     assert r.exit_code == 1, r.output
     assert _errors(r) == ["stickslip: error: '': empty path"]
-    assert [row["trace"] for row in csv.DictReader(out.open())] == ["good0"]
+    rows = list(csv.DictReader(out.open()))
+    assert [row["trace"] for row in rows if row["quality"] == "ok"] == ["good0"]
+    assert [row["quality"] for row in rows if row["quality"] != "ok"] == ["empty path"]
 
 
 def test_infer_bad_model_files_give_one_line(traces, tmp_path):
@@ -98,8 +107,8 @@ def test_train_and_evaluate_small(tmp_path):
     data = tmp_path / "s.h5"
     run_sweep(SweepConfig(n=40, seed=9), data, progress=False)
     model = tmp_path / "m.pt"
-    r = _run(["train", "--data", data, "--features", "raw", "--epochs", 2, "--window", 32,
-              "--out", model, "--no-progress"])  # fmt: skip
+    r = _run(["train", "--kind", "window", "--data", data, "--features", "raw", "--epochs", 2,
+              "--window", 32, "--out", model])  # fmt: skip
     assert r.exit_code == 0, r.output
     assert model.exists() and model.with_suffix(".loss.png").exists()
     r = _run(["evaluate", "--model", model, "--data", data, "--out", tmp_path / "ev"])
@@ -108,7 +117,7 @@ def test_train_and_evaluate_small(tmp_path):
         assert (tmp_path / "ev" / name).exists()
     r = _run(["train", "--data", tmp_path / "nope.h5", "--out", model])
     assert r.exit_code == 2 and len(_errors(r)) == 1
-    r = _run(["train", "--data", data, "--features", "fft", "--out", model])
+    r = _run(["train", "--kind", "window", "--data", data, "--features", "fft", "--out", model])
     assert r.exit_code == 2 and "raw or pi" in r.stderr
 
 

@@ -12,9 +12,29 @@ EXIT_FAILED_INPUT = 1  # some input could not be processed; the rest was
 EXIT_USAGE = 2  # bad arguments or parameters
 
 
+# verbosity of the status lines: 0 quiet (-q), 1 normal, 2 verbose (-v); errors always show
+VERBOSITY = {"level": 1}
+
+
+def set_verbosity(level: int) -> None:
+    """Set the verbosity of status lines (``-q``: 0, default 1, ``-v``: 2)."""
+    VERBOSITY["level"] = level
+
+
 def error(message: str) -> None:
     """Print one error line to stderr."""
     typer.echo(f"stickslip: error: {message}", err=True)
+
+
+def debug(message: str) -> None:
+    """A status line shown only with ``-v``."""
+    if VERBOSITY["level"] >= 2:
+        typer.echo(message, err=True)
+
+
+def show_progress() -> bool:
+    """Progress bars: on a terminal, not under ``-q``."""
+    return VERBOSITY["level"] >= 1 and sys.stderr.isatty()
 
 
 def usage_error(message: str) -> NoReturn:
@@ -24,8 +44,15 @@ def usage_error(message: str) -> NoReturn:
 
 
 def info(message: str) -> None:
-    """Print a status line to stderr (stdout is kept for tables)."""
-    typer.echo(message, err=True)
+    """Print a status line to stderr (stdout is kept for tables); quiet under ``-q``."""
+    if VERBOSITY["level"] >= 1:
+        typer.echo(message, err=True)
+
+
+def echo(message: str) -> None:
+    """Print a result (a table) to stdout; quiet under ``-q``."""
+    if VERBOSITY["level"] >= 1:
+        typer.echo(message)
 
 
 def is_interactive() -> bool:

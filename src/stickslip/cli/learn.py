@@ -1,4 +1,8 @@
-"""Commands ``train``, ``infer``, ``evaluate`` and ``demo`` (the learned estimator)."""
+"""Commands ``infer``, ``label``, ``evaluate``, ``train`` and ``demo``: argument parsing only.
+
+Every command runs an estimator through the one interface
+(:mod:`stickslip.estimators`) via the jobs of :mod:`stickslip.jobs`.
+"""
 
 from __future__ import annotations
 
@@ -12,158 +16,314 @@ from stickslip.cli.common import (
     EXIT_OK,
     LOADS_HELP,
     LPL_HELP,
+    echo,
     error,
     info,
     parse_loads_arg,
     reading_options,
+    show_progress,
     usage_error,
 )
 from stickslip.cli.main import app
+from stickslip.conditions import GRAPHITE, check_values
+from stickslip.estimators.base import Estimator
+from stickslip.estimators.line.training import LineTrainConfig
+from stickslip.estimators.load import load_estimator
+from stickslip.estimators.table import TableFormatError, table_format
+from stickslip.estimators.window.features import FeatureError
+from stickslip.estimators.window.modelfile import ModelFileError
+from stickslip.estimators.window.training import TrainConfig
+from stickslip.jobs import evaluate as ev
+from stickslip.jobs import infer as inf
+from stickslip.jobs import train as tr
+from stickslip.jobs.demo import load_examples
 
-MODEL_HELP = "Model file from 'stickslip train' (default: the bundled model)."
+MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'classical', or "
+              "'window' (the bundled paper MLP); default: the bundled whole-line model.")
+OUT_HELP = "Result table; the format follows the extension: .csv, .json or .parquet."
+LATTICE_HELP = "Lattice spacing a in nm (wins over the file's; default: the estimator's, 0.246)."
+VELOCITY_HELP = "Scan velocity in nm/s (wins over the file's; default: the estimator's, 60)."
+TEMPERATURE_HELP = "Temperature in K (wins over the file's; default: the estimator's, 296)."
 
 
-def _load_model(path: Path | None, any_kind: bool = False):
-    from stickslip.estimators.line.modelfile import load_any_model
-    from stickslip.estimators.window.modelfile import ModelFileError, load_model
-
+def _estimator(spec: str | None) -> Estimator:
     try:
-        return load_any_model(path) if any_kind else load_model(path)
+        return load_estimator(spec)
     except ModelFileError as e:
         usage_error(str(e))
 
 
-def _load_data(path: Path):
-    from stickslip.traces.dataset import DatasetError, load_dataset
-
+def _check_out(out: Path) -> None:
+    """Refuse an output path that cannot take a table, before any work."""
     try:
-        return load_dataset(path)
-    except DatasetError as e:
+        table_format(out)
+    except TableFormatError as e:
         usage_error(str(e))
+    if out.is_dir():
+        usage_error(f"{out}: is a directory (--out needs a file name)")
+    if not out.parent.exists():
+        usage_error(f"{out}: folder {out.parent} does not exist")
 
 
-@app.command("train")
-def train_cmd(
-    data: Path = typer.Option(..., "--data", help="Simulated sweep (.h5) from 'simulate'."),
-    out: Path = typer.Option(..., "--out", "-o", help="Model file to write (.pt)."),
-    features: str = typer.Option("pi", "--features", help="Input recipe: raw or pi."),
-    epochs: int = typer.Option(50, "--epochs", help="Training epochs."),
-    batch_size: int = typer.Option(300, "--batch-size", help="Windows per batch."),
-    lr: float = typer.Option(5e-4, "--lr", help="Adam learning rate."),
-    window: int = typer.Option(64, "--window", help="Pixels per window p."),
-    stride: int | None = typer.Option(
-        None, "--stride", help="Window stride at inference (default: the window, no overlap)."
-    ),
-    train_stride: int = typer.Option(16, "--train-stride", help="Window stride for training."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the split and the optimiser."),
-    noise: float = typer.Option(
-        0.0, "--noise", help="Augmentation: white noise per window, sigma uniform in [0, NOISE] "
-        "nN, redrawn every epoch (0: the paper's clean training)."
-    ),
-    progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar."),
-) -> None:
-    """Train the reference paper's MLP on a simulated sweep (80/20 split by trajectory).
+def _check_conditions(lattice: float | None, velocity: float | None,
+                      temperature: float | None) -> None:  # fmt: skip
+    why = check_values(lattice, velocity, temperature)
+    if why:
+        usage_error(why)
 
-    Writes the model file, a loss-curve plot beside it (<out>.loss.png) and prints the
-    validation metrics (per-trajectory, mean over windows).
-    """
-    from stickslip.diagnostics.plots import loss_curve
-    from stickslip.estimators.window.features import FeatureError
-    from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
-    from stickslip.jobs.workflow import validate_and_save
 
-    if features not in ("raw", "pi"):
-        usage_error(f"--features must be raw or pi (got '{features}')")
-    if epochs < 1 or batch_size < 1 or not lr > 0 or noise < 0:
-        usage_error("--epochs, --batch-size and --lr must be positive, --noise >= 0")
-    ds = _load_data(data)
+def run_estimation(
+    estimator: Estimator, traces: list[str], out: Path, *, lattice: float | None,
+    velocity: float | None, temperature: float | None, calibration: float | None,
+    lines_per_load: int | None, loads: str | None, plots: Path | None, classical: bool,
+    check: bool, truth: dict | None = None, examples: bool = False,
+) -> int:  # fmt: skip
+    """The shared body of ``infer``, ``label`` and ``demo``; returns the exit code."""
+    _check_out(out)
+    _check_conditions(lattice, velocity, temperature)
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
+    if examples:
+        found, errors = load_examples()[0], []
+    else:
+        found, errors = inf.read_inputs(traces, opts)
+    info(f"estimator: {estimator.describe()}; {len(found)} trace(s) read")
+    result = inf.infer(estimator, found, errors, lattice_nm=lattice, velocity_nm_per_s=velocity,
+                       temperature_K=temperature, classical=classical, check=check)  # fmt: skip
+    for line in result.error_lines():
+        error(line)
+    for note in result.table.notes:
+        info(f"note: {note}")
+    ok = result.table.ok()
+    if not result.table.rows:
+        error("no input could be read; nothing written")
+        return EXIT_FAILED_INPUT
     try:
-        spec = spec_for_dataset(ds, features, window, stride or window, train_stride)
-        if ds.force_nN.shape[1] < window:
-            usage_error(f"--window {window} is longer than the traces ({ds.force_nN.shape[1]})")
-        cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, noise_nN=noise)
-        model, hist, val_idx = train_model(ds, spec, cfg, progress=progress)
-    except (FeatureError, ValueError) as e:
-        usage_error(str(e))
-    ev = validate_and_save(model, ds, val_idx, out)
-    loss_curve(hist.train_loss, hist.val_loss, out.with_suffix(".loss.png"))
-    info(f"trained {epochs} epochs in {hist.seconds:.0f} s; validation ({val_idx.size} traj.):")
-    typer.echo(ev.summary())
-    info(f"wrote {out} and {out.with_suffix('.loss.png')}")
+        written = inf.write_outputs(result, out, estimator.name)
+    except OSError as e:
+        usage_error(f"cannot write {out} ({e.strerror or e})")
+    if ok:
+        echo(inf.summary_text(result.table, truth))
+    if plots is not None:
+        panels = inf.write_panels(result, estimator, plots)
+        info(f"wrote {len(panels)} panels in {plots}")
+    n_flag = len(result.table.rows) - len(ok) - len(result.refused)
+    info(f"{len(ok)} ok, {n_flag} flagged, {len(result.refused)} without an estimate -> "
+         + ", ".join(str(p) for p in written))
+    if not ok and not any("U0_eV" in r for r in result.table.rows):
+        return EXIT_FAILED_INPUT
+    return EXIT_FAILED_INPUT if result.refused else EXIT_OK
 
 
 @app.command("infer")
 def infer_cmd(
-    traces: list[str] = typer.Argument(..., help="Trace files or folders."),
-    out: Path = typer.Option(..., "--out", "-o", help="Result table (CSV)."),
-    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
-    lattice: float | None = typer.Option(
-        None, "--lattice", help="Lattice spacing a in nm (default: the model's, 0.246)."
-    ),
-    velocity: float | None = typer.Option(None, "--velocity", help="Scan velocity, nm/s."),
-    temperature: float | None = typer.Option(None, "--temperature", help="Temperature, K."),
+    traces: list[str] = typer.Argument(..., help="Trace files, vendor files or folders."),
+    out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
+    model: str | None = typer.Option(None, "--model", help=MODEL_HELP),
+    lattice: float | None = typer.Option(None, "--lattice", help=LATTICE_HELP),
+    velocity: float | None = typer.Option(None, "--velocity", help=VELOCITY_HELP),
+    temperature: float | None = typer.Option(None, "--temperature", help=TEMPERATURE_HELP),
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
     lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
     loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for per-trace panels."),
     classical: bool = typer.Option(
-        True, "--classical/--no-classical", help="Add the classical estimator's columns."
-    ),
+        True, "--classical/--no-classical",
+        help="Add the classical estimator's columns (classical_*) beside a learned model's "
+        "(moot with --model classical)."),
     check: bool = typer.Option(
-        False, "--check", help="Line models: re-simulate each trace at its estimate and report"
-        " a goodness of fit (gof, ppc_flag); with --plots the overlay is drawn."
-    ),
+        False, "--check", help="Re-simulate each trace at its estimate and report a goodness "
+        "of fit (gof, ppc_flag); with --plots the overlay is drawn."),
 ) -> None:
-    """Estimate <F>, U0, K and eta of each trace with a trained network.
+    """Estimate <F>, U0, K and eta of every trace, with any estimator.
 
-    Default model: the bundled whole-line CNN ensemble, one row per trace with the
-    estimates, their standard deviations (*_std) and 68 % / 95 % intervals (*_lo68,
-    *_hi68, *_lo95, *_hi95). With a window model (--model from 'stickslip train'): mean
-    over windows, spread over windows (*_std) and window count. The classical
-    estimator's values are beside them (classical_*). Unreadable or too-short traces
-    are reported one line each; the others are processed (exit code 1).
+    One row per trace (and per unreadable input, with its reason): the estimates,
+    *_std, the 68 % / 95 % intervals where the estimator gives them, quality, the
+    conditions used and where each came from (flag, file, model), provenance.
+    Unreadable or refused inputs are reported one line each (one line per file and
+    reason for map lines); the others are processed (exit code 1).
     """
-    from stickslip.jobs.workflow import infer_job
-
-    for name, v in (("--lattice", lattice), ("--velocity", velocity)):
-        if v is not None and not v > 0:
-            usage_error(f"{name} must be > 0")
-    if temperature is not None and temperature < 0:
-        usage_error("--temperature must be >= 0 K")
-    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
-    m = _load_model(model, any_kind=True)
-    failed = infer_job(
-        m, traces, out, plots, lattice_nm=lattice, velocity_nm_per_s=velocity,
-        temperature_K=temperature, reader_options=opts, classical=classical,
-        echo=typer.echo, warn=error, note=info, check=check,
+    code = run_estimation(
+        _estimator(model), traces, out, lattice=lattice, velocity=velocity,
+        temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
+        loads=loads, plots=plots, classical=classical, check=check,
     )  # fmt: skip
-    raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)
+    raise typer.Exit(code)
+
+
+@app.command("label")
+def label_cmd(
+    traces: list[str] = typer.Argument(..., help="Trace files, vendor files or folders."),
+    out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
+    lattice: float | None = typer.Option(None, "--lattice", help=LATTICE_HELP),
+    velocity: float | None = typer.Option(None, "--velocity", help=VELOCITY_HELP),
+    temperature: float | None = typer.Option(None, "--temperature", help=TEMPERATURE_HELP),
+    plots: Path | None = typer.Option(
+        None, "--plots", help="Folder for one diagnostic plot per trace (PNG)."),
+    calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
+    lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
+    loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
+) -> None:
+    """Label traces with the classical stick-slip estimator ('infer --model classical').
+
+    Finds the slips, fits the stick slopes and peak forces, and inverts the
+    Prandtl-Tomlinson relations (F_max = pi U0/a, stick slope K eta c/(1 + eta c)),
+    correcting the peak for thermal activation at the trace's temperature, velocity and
+    lattice. The columns are those of 'infer', plus regime, k_exp_N_m, F_peak_nN,
+    n_slips; quality is ok or the reason the values are missing or doubtful.
+    """
+    code = run_estimation(
+        load_estimator("classical"), traces, out, lattice=lattice, velocity=velocity,
+        temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
+        loads=loads, plots=plots, classical=False, check=False,
+    )  # fmt: skip
+    raise typer.Exit(code)
 
 
 @app.command("evaluate")
 def evaluate_cmd(
-    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
-    data: Path = typer.Option(..., "--data", help="Labelled simulated sweep (.h5)."),
+    traces: list[str] = typer.Argument(None, help="Labelled trace files or folders, or a "
+                                       "simulated sweep (.h5, .zarr) whose truths are inside."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+    model: str | None = typer.Option(None, "--model", help=MODEL_HELP),
+    data: list[str] = typer.Option(None, "--data", help="A simulated sweep (alias)."),
+    truth: Path | None = typer.Option(
+        None, "--truth", help="Truth table (columns trace,U0_eV,K_N_m,F_mean_nN[,eta]); rows "
+        "match result rows by trace name."),
+    lattice: float | None = typer.Option(None, "--lattice", help=LATTICE_HELP),
+    velocity: float | None = typer.Option(None, "--velocity", help=VELOCITY_HELP),
+    temperature: float | None = typer.Option(None, "--temperature", help=TEMPERATURE_HELP),
+    calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
 ) -> None:
-    """RMSE and relative errors per target, parity plots, metrics as JSON and CSV."""
-    from stickslip.jobs.report import evaluate_model, write_evaluation
+    """Score any estimator on any labelled set: metrics.json, predictions, plots.
 
-    m = _load_model(model)
-    ds = _load_data(data)
-    ev = evaluate_model(m, ds)
-    write_evaluation(ev, out, {"model": str(model or "bundled"), "data": str(data),
-                               "data_fingerprint": ds.fingerprint()})  # fmt: skip
-    typer.echo(ev.summary())
-    info(f"wrote metrics.json, metrics.csv, predictions.csv, parity.png in {out}")
+    metrics.json holds one object per target (F_mean_nN, U0_eV, K_N_m, eta) with rmse,
+    rel_rmse, median_rel, n, answered and, for estimators with intervals, coverage68 and
+    coverage95; 'info' holds the estimator, data and conditions.
+    """
+    inputs = list(traces or []) + list(data or [])
+    if not inputs:
+        usage_error("give labelled traces or a sweep (TRACES... or --data SWEEP.h5)")
+    if out.exists() and not out.is_dir():
+        usage_error(f"{out}: exists and is not a folder")
+    _check_conditions(lattice, velocity, temperature)
+    est = _estimator(model)
+    found, errors = inf.read_inputs(inputs, reading_options(calibration, None, None))
+    result = inf.infer(est, found, errors, lattice_nm=lattice, velocity_nm_per_s=velocity,
+                       temperature_K=temperature, classical=False)  # fmt: skip
+    for line in result.error_lines():
+        error(line)
+    try:
+        labels = (ev.truth_from_table(truth) if truth is not None
+                  else ev.truth_from_traces(result.table, result.traces))  # fmt: skip
+    except ev.TruthError as e:
+        usage_error(str(e))
+    if not labels:
+        usage_error("no truths: give --truth TABLE.csv for trace files")
+    evaluation = ev.evaluate(result.table, labels)
+    for p in evaluation.problems:
+        error(p)
+    info_doc = {"estimator": est.name, "description": est.describe(), "inputs": inputs,
+                "truth": str(truth) if truth else "stored with the traces",
+                "left_out": len(evaluation.problems)}  # fmt: skip
+    paths = ev.write_evaluation(evaluation, out, info_doc)
+    echo(evaluation.summary())
+    info(f"wrote {', '.join(p.name for p in paths)} in {out}")
+    bad = errors or result.refused or evaluation.problems
+    raise typer.Exit(EXIT_FAILED_INPUT if bad else EXIT_OK)
+
+
+@app.command("train")
+def train_cmd(
+    out: Path = typer.Option(..., "--out", "-o", help="Model file to write (.pt)."),
+    kind: str = typer.Option("line", "--kind", help="line (the default model's kind) or "
+                             "window (the reference paper's MLP)."),
+    data: list[str] = typer.Option(None, "--data", help="Training data: a sweep (.h5, .zarr), "
+                                   "or trace files/folders with --labels. Repeatable."),
+    labels: Path | None = typer.Option(None, "--labels", help="Label table for trace files "
+                                       "(columns trace,U0_eV,K_N_m,F_mean_nN)."),
+    mix: list[str] = typer.Option(None, "--mix", help="Labelled real traces added to simulated "
+                                  "training (with --mix-labels, --mix-fraction). Repeatable."),
+    mix_labels: Path | None = typer.Option(None, "--mix-labels", help="Label table of --mix."),
+    mix_fraction: float = typer.Option(0.01, "--mix-fraction", help="Fraction of training "
+                                       "lines that are real (the paper's 1 %: 0.01)."),
+    recipe: str | None = typer.Option(None, "--recipe", help="'bundled': simulate (cached in "
+                                      "--work) and train on the bundled line model's data."),
+    work: Path = typer.Option(Path("build/line-train"), "--work", help="Cache folder of "
+                              "--recipe bundled and of the clean expert."),
+    features: str = typer.Option("pi", "--features", help="Window kind: raw or pi."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Epochs (line 45, window 50)."),
+    members: int = typer.Option(3, "--members", help="Line kind: ensemble members."),
+    expert: str = typer.Option("none", "--expert", help="Line kind: window model read as "
+                               "expert input: none, bundled, clean (bundled recipe), or a file."),
+    batch_size: int | None = typer.Option(None, "--batch-size", help="Batch size."),
+    lr: float | None = typer.Option(None, "--lr", help="Adam learning rate."),
+    window: int = typer.Option(64, "--window", help="Window kind: pixels per window p."),
+    train_stride: int = typer.Option(16, "--train-stride", help="Window kind: training stride."),
+    noise: float = typer.Option(0.0, "--noise", help="Window kind: white-noise augmentation "
+                                "up to NOISE nN (0: the paper's clean training)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the split and the optimiser."),
+) -> None:
+    """Train an estimator: the whole-line ensemble (default) or the paper's window MLP.
+
+    Reproduce the bundled line model with
+    'stickslip train --kind line --recipe bundled --expert clean --seed 102 --out M.pt'.
+    """
+    if kind not in tr.KINDS:
+        usage_error(f"--kind must be one of {', '.join(tr.KINDS)} (got '{kind}')")
+    if features not in ("raw", "pi"):
+        usage_error(f"--features must be raw or pi (got '{features}')")
+    if (epochs is not None and epochs < 1) or (lr is not None and not lr > 0) or noise < 0:
+        usage_error("--epochs and --lr must be positive, --noise >= 0")
+    if out.is_dir() or not out.parent.exists():
+        usage_error(f"{out}: cannot write a model file there")
+    try:
+        if recipe == "bundled":
+            training = tr.bundled_line_data(work, progress=show_progress())
+        elif recipe is not None:
+            usage_error(f"--recipe must be 'bundled' (got '{recipe}')")
+        else:
+            training = tr.read_training_data(data or [], labels, GRAPHITE, echo=info)
+        if mix:
+            if mix_labels is None:
+                usage_error("--mix needs --mix-labels TABLE.csv")
+            real = tr.read_training_data(mix, mix_labels, GRAPHITE, echo=info).data
+            training = tr.mix_in(training, real, mix_fraction, seed)
+    except (tr.TrainingDataError, ev.TruthError) as e:
+        usage_error(str(e))
+    info(f"training a {kind} model on {training.data.n} lines")
+    try:
+        if kind == "line":
+            cfg = LineTrainConfig(members=members, seed=seed,
+                                  **{k: v for k, v in (("epochs", epochs), ("lr", lr),
+                                                       ("batch_size", batch_size))
+                                     if v is not None})  # fmt: skip
+            exp = tr.expert_model(expert, work)
+            report = tr.train_line(training, out, cfg, exp, expert, progress=show_progress())
+            val = report.get("validation", {})
+            info(f"validation: {val}" if val else "trained")
+        else:
+            cfg_w = TrainConfig(seed=seed, noise_nN=noise,
+                                **{k: v for k, v in (("epochs", epochs), ("lr", lr),
+                                                     ("batch_size", batch_size))
+                                   if v is not None})  # fmt: skip
+            tr.train_window(training, out, features, cfg_w, window, None, train_stride,
+                            progress=show_progress())  # fmt: skip
+    except (FeatureError, ValueError, ModelFileError) as e:
+        usage_error(str(e))
+    info(f"wrote {out}")
 
 
 @app.command("demo")
 def demo_cmd(
     out: Path = typer.Option(Path("stickslip-demo"), "--out", "-o", help="Output folder."),
 ) -> None:
-    """Run 'infer' with the bundled model on the bundled example traces."""
-    from stickslip.jobs.workflow import demo_job
-
-    failed = demo_job(out, echo=typer.echo, warn=error, note=info)
-    raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)
+    """'infer' with the bundled model on the bundled example traces (true values beside)."""
+    out.mkdir(parents=True, exist_ok=True)
+    traces, truth = load_examples()
+    info(f"bundled model on {len(traces)} example traces (true values in the last columns)")
+    code = run_estimation(
+        load_estimator(None), [], out / "results.csv", lattice=None, velocity=None,
+        temperature=None, calibration=None, lines_per_load=None, loads=None,
+        plots=out / "plots", classical=True, check=True, truth=truth, examples=True,
+    )  # fmt: skip
+    raise typer.Exit(code)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from stickslip._version import __version__
+from stickslip.cli.common import set_verbosity
 
 app = typer.Typer(
     name="stickslip",
@@ -29,15 +30,19 @@ def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version."
     ),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors (no status lines, "
+                               "tables or progress bars)."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="More status lines."),
 ) -> None:
     """stickslip command line."""
+    set_verbosity(0 if quiet else 2 if verbose else 1)
 
 
 def _register() -> None:
     # Each module adds its commands to `app`; imported here so `app` is complete.
     import importlib
 
-    for mod in ("simulate", "formats", "label", "learn"):
+    for mod in ("simulate", "formats", "learn", "velocity"):
         try:
             importlib.import_module(f"stickslip.cli.{mod}")
         except ModuleNotFoundError as e:

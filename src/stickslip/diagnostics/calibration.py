@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from statistics import NormalDist
 
 import numpy as np
+
+from stickslip.estimators.calibration import gaussian_z
 
 
 def coverage(true: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -14,11 +15,6 @@ def coverage(true: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     t, lo, hi = (np.asarray(v, float) for v in (true, lo, hi))
     ok = np.isfinite(t) & np.isfinite(lo) & np.isfinite(hi)
     return float(np.mean((t[ok] >= lo[ok]) & (t[ok] <= hi[ok]))) if ok.any() else float("nan")
-
-
-def gaussian_z(level: float) -> float:
-    """Half-width, in standard deviations, of a Gaussian's central interval at ``level``."""
-    return NormalDist().inv_cdf(0.5 + level / 2)
 
 
 def reliability(true: np.ndarray, mean: np.ndarray, sigma: np.ndarray, log: bool,

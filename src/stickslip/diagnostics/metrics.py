@@ -88,3 +88,47 @@ def format_table(table: Mapping[str, Mapping[str, float]]) -> str:
             f"{m['r2']:>8.4f}"
         )
     return "\n".join(lines)
+
+
+def target_metrics(true: np.ndarray, pred: np.ndarray,
+                   intervals: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None
+                   ) -> dict[str, float]:  # fmt: skip
+    """The evaluation metrics of one target over rows with a truth.
+
+    Parameters
+    ----------
+    true, pred : ndarray (N,)
+        Truths and estimates; a missing estimate (NaN) is a refusal: it counts in ``n``
+        and not in ``answered`` or in the errors.
+    intervals : mapping, optional
+        ``{"68": (lo, hi), "95": (lo, hi)}``: interval bounds per row.
+
+    Returns
+    -------
+    dict
+        ``n`` (rows with a truth), ``answered`` (of those, rows with an estimate),
+        ``rmse``, ``rel_rmse``, ``median_rel`` (median of |relative error|), ``bias``,
+        and ``coverage68``/``coverage95`` where intervals are given.
+    """
+    t = np.asarray(true, float)
+    p = np.asarray(pred, float)
+    has_truth = np.isfinite(t)
+    ok = has_truth & np.isfinite(p)
+    err = p[ok] - t[ok]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = err / t[ok]
+    rel = rel[np.isfinite(rel)]
+    nan = float("nan")
+    out = {
+        "n": int(has_truth.sum()),
+        "answered": int(ok.sum()),
+        "rmse": float(np.sqrt(np.mean(err**2))) if err.size else nan,
+        "rel_rmse": float(np.sqrt(np.mean(rel**2))) if rel.size else nan,
+        "median_rel": float(np.median(np.abs(rel))) if rel.size else nan,
+        "bias": float(np.mean(err)) if err.size else nan,
+    }
+    for level, (lo, hi) in (intervals or {}).items():
+        lo, hi = np.asarray(lo, float)[ok], np.asarray(hi, float)[ok]
+        inside = (t[ok] >= lo) & (t[ok] <= hi)
+        out[f"coverage{level}"] = float(np.mean(inside)) if inside.size else nan
+    return out

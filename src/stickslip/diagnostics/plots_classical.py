@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
+from typing import Any
 
 import matplotlib
 
@@ -11,7 +13,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from stickslip.atomic import atomic_path  # noqa: E402
-from stickslip.estimators.classical.estimator import ClassicalEstimate  # noqa: E402
 from stickslip.estimators.classical.slips import SLIP_F, SLIP_PEAK, SLIP_X, SlipAnalysis  # noqa: E402
 
 
@@ -20,12 +21,18 @@ def plot_trace_diagnostics(
     x_nm: np.ndarray,
     force_nN: np.ndarray,
     analysis: SlipAnalysis,
-    estimate: ClassicalEstimate,
+    row: Mapping[str, Any],
 ) -> None:
-    """Trace with detected stick segments, their fitted branches and the slip points."""
+    """Trace with detected stick segments, their fitted branches and the slip points.
+
+    ``row`` is the trace's row of the classical estimator's table. On a flagged row
+    (``quality`` not ``ok``) the fitted branches are not drawn: they do not describe
+    the data; the title says why.
+    """
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(x_nm, force_nN, ".", ms=2, color="0.6", label="trace")
-    for k in range(analysis.segments.shape[0]):
+    ok = row.get("quality") == "ok"
+    for k in range(analysis.segments.shape[0] if ok else 0):
         xs, fs = analysis.segment_curve(k, x_nm)
         ax.plot(xs, fs, "-", lw=1.2, color="C0", label="stick fits" if k == 0 else None)
     s = analysis.slips
@@ -33,12 +40,17 @@ def plot_trace_diagnostics(
     ax.plot(s[:, SLIP_X], s[:, SLIP_PEAK], "_", ms=8, color="C1", label="peaks")
     ax.set_xlabel("support position X (nm)")
     ax.set_ylabel("lateral force F (nN)")
-    ax.set_title(
-        f"{estimate.trace}: U0 = {estimate.U0_eV:.3g} eV, K = {estimate.K_N_m:.3g} N/m, "
-        f"eta = {estimate.eta:.3g}, k_exp = {estimate.k_exp_N_m:.3g} N/m, "
-        f"{estimate.n_slips} slips, {estimate.regime or '-'} ({estimate.quality})",
-        fontsize=9,
-    )
+    def g(k: str) -> float:
+        v = row.get(k)
+        return float(v) if isinstance(v, (int, float, np.number)) else float("nan")
+
+    if ok:
+        title = (f"{row['trace']}: U0 = {g('U0_eV'):.3g} eV, K = {g('K_N_m'):.3g} N/m, "
+                 f"eta = {g('eta'):.3g}, k_exp = {g('k_exp_N_m'):.3g} N/m, "
+                 f"{int(g('n_slips'))} slips, {row.get('regime') or '-'}")  # fmt: skip
+    else:
+        title = f"{row['trace']}: flagged ({row.get('quality')}); no stick fit drawn"
+    ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     _save(fig, path)

@@ -16,27 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stickslip.estimators.noise import noise_nN
 from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.simulate import simulate
 
 STATISTICS = ("F_mean", "F_std", "F_p90", "F_p99", "slope_med", "slips_per_nm", "drop_mean")
-
-
-def noise_level_nN(force_nN: np.ndarray) -> np.ndarray:
-    """Robust white-noise estimate per trace from second differences (N,).
-
-    Second differences of white noise have std sqrt(6) sigma. Slips make a quarter or
-    more of them large, so the estimate is iterated: values beyond 3.5 standard
-    deviations are dropped and the median absolute deviation recomputed.
-    """
-    d2 = np.abs(np.diff(np.atleast_2d(force_nN), n=2, axis=1))
-    keep = np.ones_like(d2, dtype=bool)
-    for _ in range(4):
-        med = np.nanmedian(np.where(keep, d2, np.nan), axis=1, keepdims=True)
-        # for |Z| the median is 0.6745 sigma; ignore the (symmetric) sign of d2
-        sd = np.nan_to_num(med / 0.6745, nan=0.0)
-        keep = d2 <= 3.5 * sd + 1e-15
-    return sd[:, 0] / np.sqrt(6.0)
 
 
 def trace_statistics(x_nm: np.ndarray, force_nN: np.ndarray) -> np.ndarray:
@@ -134,8 +118,8 @@ def posterior_predictive_check(
     rng = np.random.default_rng([seed, 1])
     # the replicates already carry thermal noise: add only the detector noise the
     # observed trace has beyond it
-    intrinsic = noise_level_nN(res.force_nN).reshape(n, n_replicates).mean(axis=1)
-    extra = np.sqrt(np.clip(noise_level_nN(F) ** 2 - intrinsic**2, 0.0, None))
+    intrinsic = noise_nN(res.force_nN).reshape(n, n_replicates).mean(axis=1)
+    extra = np.sqrt(np.clip(noise_nN(F) ** 2 - intrinsic**2, 0.0, None))
     reps = res.force_nN + rng.standard_normal((rep_n, p)) * np.repeat(extra, n_replicates)[:, None]
     s_obs = trace_statistics(x, F)
     s_rep = trace_statistics(x, reps).reshape(n, n_replicates, -1)

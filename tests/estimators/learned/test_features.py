@@ -7,12 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stickslip.estimators.mapping import resample_mean
 from stickslip.estimators.window.features import (
     FeatureError,
     FeatureSpec,
     n_windows,
     processed_slopes,
-    resample_mean,
     window_features,
     windows,
 )

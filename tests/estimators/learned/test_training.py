@@ -13,7 +13,8 @@ from stickslip.estimators.window.training import (
     train_model,
     window_set,
 )
-from stickslip.jobs.report import evaluate_model
+from stickslip.estimators.window.estimator import WindowEstimator
+from stickslip.jobs.evaluate import evaluate_dataset
 from stickslip.traces.trace import Trace
 
 
@@ -48,7 +49,7 @@ def test_small_training_beats_the_trivial_baseline(trained, small_sweep):
     assert len(hist.train_loss) == 15 and hist.train_loss[-1] < hist.train_loss[0]
     # the kept weights are those of the best validation epoch
     assert model.train_config["best_epoch"] == 1 + int(np.argmin(hist.val_loss))
-    ev = evaluate_model(model, small_sweep, val_idx)
+    ev = evaluate_dataset(WindowEstimator(model), small_sweep, val_idx)
     train_idx = np.setdiff1d(np.arange(small_sweep.n), val_idx)
     for k in ("U0_eV", "K_N_m"):
         truth = small_sweep.params[k]

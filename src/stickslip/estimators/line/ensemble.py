@@ -44,8 +44,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from stickslip.diagnostics.calibration import gaussian_z
-from stickslip.estimators.window.features import resample_mean
+from stickslip.conditions import GRAPHITE, Reference
+from stickslip.estimators.calibration import gaussian_z
+from stickslip.estimators.mapping import to_reference
+from stickslip.estimators.noise import log_noise_level
 from stickslip.estimators.window.inference import predict_windows
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.units import eta_from
@@ -62,10 +64,10 @@ N_EXPERT = 5  # expert inputs: U0', K', eta estimates and the windows' spread of
 class LineSpec:
     """How a trace becomes a line-model input (saved in the model file)."""
 
-    lattice_nm: float = 0.246
-    pixel_nm: float = 11.0 / 512
-    velocity_nm_per_s: float = 60.0
-    temperature_K: float = 296.0
+    lattice_nm: float = GRAPHITE.lattice_nm
+    pixel_nm: float = GRAPHITE.pixel_nm
+    velocity_nm_per_s: float = GRAPHITE.velocity_nm_per_s
+    temperature_K: float = GRAPHITE.temperature_K
     force_scale_nN: float = 5.0
     slope_scale_nN: float = 1.0
     crop: int = 352
@@ -74,16 +76,16 @@ class LineSpec:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @property
+    def reference(self) -> Reference:
+        """The reference conditions of the model (lattice, pixel, velocity, temperature)."""
+        return Reference(self.lattice_nm, self.pixel_nm, self.velocity_nm_per_s,
+                         self.temperature_K)  # fmt: skip
+
 
 def map_line(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float, spec: LineSpec):
     """Mapped, resampled line on the reference lattice and pixel (1-D array)."""
-    s = float(lattice_nm) / spec.lattice_nm
-    x = np.asarray(x_nm, float) / s
-    f = np.asarray(force_nN, float)
-    step = np.diff(x)
-    if step.size and np.all(np.abs(step / spec.pixel_nm - 1.0) < 1e-3):
-        return f  # already on the reference pixel: nothing to resample
-    return resample_mean(x, f, spec.pixel_nm)
+    return to_reference(x_nm, force_nN, lattice_nm, spec.reference)
 
 
 def line_inputs(lines: list[np.ndarray], spec: LineSpec, length: int | None = None,
@@ -359,11 +361,11 @@ class SpreadClasses:
         lattice_ratio : ndarray (B,)
             ``a / a0`` of each line (1: recorded on the reference lattice).
         """
-        return self._from_level(noise_level(force_nN), lattice_ratio)
+        return self._from_level(log_noise_level(force_nN), lattice_ratio)
 
     def classify_lines(self, lines: list[np.ndarray], lattice_ratio: np.ndarray) -> np.ndarray:
         """:meth:`classify` for mapped lines of any lengths."""
-        return self._from_level(np.array([noise_level(f) for f in lines]), lattice_ratio)
+        return self._from_level(np.array([log_noise_level(f) for f in lines]), lattice_ratio)
 
     def _from_level(self, level: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
         on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
@@ -372,12 +374,6 @@ class SpreadClasses:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def noise_level(force_nN: np.ndarray) -> np.ndarray:
-    """ln of the median absolute second difference (nN) of each row of ``force_nN``."""
-    d2 = np.abs(np.diff(np.asarray(force_nN, float), n=2, axis=-1))
-    return np.log(np.median(d2, axis=-1) + 1e-4)
 
 
 @dataclass

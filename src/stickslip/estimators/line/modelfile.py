@@ -41,7 +41,14 @@ from stickslip.estimators.line.ensemble import (
     LineSpec,
     SpreadClasses,
 )
-from stickslip.estimators.window.modelfile import ModelFileError, _major, _plain, from_payload
+from stickslip.estimators.window.modelfile import (
+    ModelFileError,
+    _major,
+    _plain,
+    from_payload,
+    load_bundled,
+    read_payload,
+)
 
 FORMAT = "stickslip-line-model-1"
 BUNDLED = "line_model.pt"
@@ -135,32 +142,7 @@ def load_line_model(path: str | os.PathLike | None = None) -> LineEnsemble:
     ModelFileError
         One line: missing, corrupt, not a line model, or from an incompatible version.
     """
-    from stickslip.estimators.window.modelfile import load_bundled, read_payload
-
     if path is None:
         return load_bundled(BUNDLED, load_line_model)
     p = Path(path)
     return line_from_payload(read_payload(p), str(p))
-
-
-def load_any_model(path: str | os.PathLike | None = None):
-    """A window model or a line model, whichever the file holds.
-
-    With no path: the bundled line model if this installation has one, else the
-    bundled window model.
-    """
-    from stickslip.estimators.window.modelfile import FORMAT as WINDOW_FORMAT
-    from stickslip.estimators.window.modelfile import load_model, read_payload
-
-    if path is None:
-        from importlib.resources import files
-
-        if files("stickslip").joinpath("resources", BUNDLED).is_file():
-            return load_line_model(None)
-        return load_model(None)
-    payload = read_payload(path)
-    if payload.get("format") == FORMAT:
-        return line_from_payload(payload, str(path))
-    if payload.get("format") == WINDOW_FORMAT:
-        return from_payload(payload, str(path))
-    return from_payload(payload, str(path))  # raises the one-line format error

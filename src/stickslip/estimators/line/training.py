@@ -68,6 +68,7 @@ from stickslip.estimators.line.ensemble import (
     map_line,
     predict_std_lines,
 )
+from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.simulators.instrument import (
     LAB,
@@ -245,13 +246,6 @@ def _standardise_friction(Y: np.ndarray, observed_mean: np.ndarray, y_mean, y_st
     return torch.from_numpy(((Y - y_mean) / y_std).astype(np.float32))
 
 
-def split(n: int, config: LineTrainConfig, rng: np.random.Generator):
-    """(validation, training) trajectory indices: the first draw of the training rng."""
-    perm = rng.permutation(n)
-    n_val = max(1, int(round(config.val_fraction * n)))
-    return perm[:n_val], perm[n_val:]
-
-
 @dataclass
 class ValidationSet:
     """Held-out lines as the network sees them, in two strata.
@@ -312,7 +306,7 @@ def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
     """Training indices, validation lines and the target matrix (:func:`line_targets`) of
     a run with ``config``; ``rng`` is the run's, its first draw the split (:func:`split`),
     so training and re-calibration see the same validation lines."""
-    val, train = split(force_nN.shape[0], config, rng)
+    train, val = split_indices(force_nN.shape[0], config.val_fraction, rng)
     vs = validation_set(force_nN, x_nm, params, val, config, spec)
     Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
                      params["lattice_nm"], spec)  # fmt: skip

@@ -22,6 +22,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from stickslip.conditions import GRAPHITE, Reference
+
 RECIPES = ("raw", "pi")
 
 
@@ -58,10 +60,10 @@ class FeatureSpec:
     window: int = 64
     stride: int = 64
     train_stride: int = 8
-    pixel_nm: float = 11.0 / 512
-    lattice_nm: float = 0.246
-    velocity_nm_per_s: float = 60.0
-    temperature_K: float = 296.0
+    pixel_nm: float = GRAPHITE.pixel_nm
+    lattice_nm: float = GRAPHITE.lattice_nm
+    velocity_nm_per_s: float = GRAPHITE.velocity_nm_per_s
+    temperature_K: float = GRAPHITE.temperature_K
     sigma_nN_per_nm: float = 15.0
 
     def __post_init__(self) -> None:
@@ -73,6 +75,12 @@ class FeatureSpec:
             raise FeatureError("strides must be at least 1 pixel")
         if not (self.pixel_nm > 0 and self.lattice_nm > 0 and self.sigma_nN_per_nm > 0):
             raise FeatureError("pixel size, lattice spacing and sigma must be > 0")
+
+    @property
+    def reference(self) -> Reference:
+        """The training conditions (lattice, pixel, velocity, temperature)."""
+        return Reference(self.lattice_nm, self.pixel_nm, self.velocity_nm_per_s,
+                         self.temperature_K)  # fmt: skip
 
     @property
     def n_inputs(self) -> int:
@@ -150,22 +158,3 @@ def window_features(win: np.ndarray, spec: FeatureSpec) -> np.ndarray:
     return np.concatenate([win, slopes], axis=-1)
 
 
-def resample_mean(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float) -> np.ndarray:
-    """Resample a recorded line onto pixels of ``pixel_nm``, each the mean force over its travel.
-
-    A recorded sample ``i`` is the mean force over its pixel's travel ``[x_i, x_{i+1}]``
-    (the last one as wide as its predecessor), which fixes the integral of the force over
-    every union of pixels. The new pixel ``[x_0 + j d, x_0 + (j + 1) d]`` gets the mean of
-    that integral, taking the force as constant inside each recorded pixel (exact
-    wherever a new pixel edge falls on a recorded one). Pixels that would run past the
-    line are dropped.
-    """
-    x = np.asarray(x_nm, dtype=float)
-    f = np.asarray(force_nN, dtype=float)
-    edges = np.append(x, x[-1] + (x[-1] - x[-2]))
-    n_new = int(np.floor((edges[-1] - edges[0]) / pixel_nm + 1e-9))
-    if n_new < 1:
-        return np.empty(0)
-    cum = np.concatenate([[0.0], np.cumsum(f * np.diff(edges))])
-    new_edges = edges[0] + np.arange(n_new + 1) * pixel_nm
-    return np.diff(np.interp(new_edges, edges, cum)) / pixel_nm

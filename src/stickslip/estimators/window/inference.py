@@ -3,36 +3,23 @@
 Per-trace estimate = mean over its windows (reference paper); ``*_std`` = standard
 deviation over the windows (their spread, not a standard error).
 
-Lattice mapping
----------------
-The PT model is self-similar in the lattice spacing. Substituting ``x = s x'`` with
-``s = a / a0`` (a0: the training lattice) and keeping the force unchanged turns a
-trace on lattice ``a`` with ``(U0, K)`` into one on lattice ``a0`` with
-``U0' = U0 a0 / a`` and ``K' = K a / a0``: ``F_max = pi U0 / a``, the stick slope
-``K eta / (1 + eta)`` and ``eta = 2 pi^2 U0 / (K a^2)`` are all preserved. So positions
-are divided by ``s``, the trace is resampled (pixel means) onto the training pixel, the
-network reads it, and ``U0 = U0' s``, ``K = K' / s`` map the answer back.
-
-The scan velocity does not enter the athermal quasi-static trace (the support moves
-~1e-5 lattice spacings per oscillation period), so it needs no position mapping; it
-and the temperature act only through thermal activation of slips, which the mapping
-does not carry over exactly (the equivalent temperature of the mapped trace is
-``T a0 / a``, and the slip force shifts with ``ln v``). docs/learning.md gives the
-error this leaves, measured on simulated traces at a = 0.316 nm, v = 30 nm/s.
+Traces on another lattice are mapped onto the training lattice by
+:mod:`stickslip.estimators.mapping`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 
+from stickslip.estimators.mapping import refusal, to_reference
 from stickslip.estimators.window.features import (
     FeatureError,
     n_windows,
-    resample_mean,
     window_features,
     windows,
 )
@@ -41,8 +28,6 @@ from stickslip.units import eta_from
 
 OUTPUTS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
 CHUNK_WINDOWS = 1 << 16
-PIXEL_TOLERANCE = 1e-3  # relative pixel-size mismatch below which no resampling is done
-MAX_PIXEL_RATIO = 4.0  # coarser pixels (under ~3 per lattice spacing) cannot be read
 
 
 @dataclass
@@ -159,10 +144,7 @@ def predict_array(
 def map_trace(
     x_nm: np.ndarray, force_nN: np.ndarray, model: TrainedModel, lattice_nm: float | None
 ) -> np.ndarray:
-    """A trace on the model's scale: positions divided by ``a / a0``, training pixels.
-
-    Returns the force per training pixel (resampled as pixel means when the scaled
-    pixel differs from the training one by more than 0.1 %).
+    """A trace on the model's scale (:func:`stickslip.estimators.mapping.to_reference`).
 
     Raises
     ------
@@ -171,31 +153,20 @@ def map_trace(
         4x the training pixel (fewer than ~3 pixels per lattice spacing).
     """
     spec = model.features
-    s = (spec.lattice_nm if lattice_nm is None else float(lattice_nm)) / spec.lattice_nm
-    x = np.asarray(x_nm, dtype=float) / s
-    f = np.asarray(force_nN, dtype=float)
-    pixel = (x[-1] - x[0]) / max(x.size - 1, 1)
-    if pixel > MAX_PIXEL_RATIO * spec.pixel_nm:
-        a = spec.lattice_nm * s
-        raise FeatureError(
-            f"pixel {pixel * s:.3g} nm does not resolve the {a:.3g} nm lattice (the model "
-            f"needs pixels <= {MAX_PIXEL_RATIO * spec.pixel_nm * s:.3g} nm)"
-        )
-    uniform = np.allclose(np.diff(x), pixel, rtol=1e-3, atol=0)
-    if not (uniform and abs(pixel / spec.pixel_nm - 1) < PIXEL_TOLERANCE):
-        f = resample_mean(x, f, spec.pixel_nm)
+    a = spec.lattice_nm if lattice_nm is None else float(lattice_nm)
+    why = refusal(x_nm, a, spec.reference, spec.window)
+    if why:
+        raise FeatureError(why)
+    f = to_reference(x_nm, force_nN, a, spec.reference)
     if f.size < spec.window:
-        need = spec.window * spec.pixel_nm * s
-        raise FeatureError(
-            f"too short: covers {(x[-1] - x[0]) * s:.3g} nm, one window needs {need:.3g} nm"
-        )
+        raise FeatureError(f"too short: {f.size} reference pixels, one window needs {spec.window}")
     return f
 
 
 def predict_traces(
     model: TrainedModel,
     traces: list[Any],
-    lattice_nm: float | None = None,
+    lattice_nm: float | Sequence[float] | None = None,
     keep_windows: bool = False,
 ) -> tuple[list[TraceEstimate], list[tuple[str, str]]]:
     """Estimates for :class:`~stickslip.traces.trace.Trace` objects of any length and pixel.
@@ -204,9 +175,9 @@ def predict_traces(
     ----------
     model : TrainedModel
     traces : list of Trace
-    lattice_nm : float, optional
-        Lattice spacing of the sample (default: each trace's ``meta["lattice_nm"]``,
-        else the training lattice).
+    lattice_nm : float or sequence of float, optional
+        Lattice spacing of the sample, or one per trace (default: each trace's
+        ``meta["lattice_nm"]``, else the training lattice).
     keep_windows : bool
         Keep per-window values (for plots).
 
@@ -220,8 +191,12 @@ def predict_traces(
     spec = model.features
     mapped: list[tuple[int, np.ndarray, float]] = []
     failures: list[tuple[str, str]] = []
+    per_trace = lattice_nm if isinstance(lattice_nm, (list, tuple, np.ndarray)) else None
     for i, t in enumerate(traces):
-        a = lattice_nm or t.meta.get("lattice_nm") or spec.lattice_nm
+        if per_trace is not None:
+            a = per_trace[i]
+        else:
+            a = lattice_nm or t.meta.get("lattice_nm") or spec.lattice_nm
         try:
             mapped.append((i, map_trace(t.x_nm, t.force_nN, model, a), float(a)))
         except FeatureError as e:

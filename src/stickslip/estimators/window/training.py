@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.features import FeatureSpec, window_features, windows
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.estimators.window.models import PAPER_MLP, build_model
@@ -70,12 +71,10 @@ class History:
 def split_by_trajectory(
     n: int, val_fraction: float = 0.2, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Seeded random split of trajectory indices into (train, validation), sorted."""
-    if n < 2:
-        raise ValueError(f"need at least 2 trajectories to split (got {n})")
-    perm = np.random.default_rng(seed).permutation(n)
-    n_val = min(max(1, int(round(val_fraction * n))), n - 1)
-    return np.sort(perm[n_val:]), np.sort(perm[:n_val])
+    """Seeded split of trajectory indices into (train, validation), each sorted
+    (:func:`stickslip.estimators.split.split_indices`)."""
+    train, val = split_indices(n, val_fraction, np.random.default_rng(seed))
+    return np.sort(train), np.sort(val)
 
 
 def target_matrix(params: dict[str, np.ndarray], log_targets: tuple[str, ...]) -> np.ndarray:

@@ -69,6 +69,81 @@ class Channel:
 
 
 @dataclass
+class Axis:
+    """One axis of a stored data block (for ``inspect``).
+
+    Attributes
+    ----------
+    name : str
+        Axis name (``"x"``, ``"y"``, a spectroscopy variable ...).
+    unit : str
+        Unit of ``step`` as stored (``"um"``, ``"V"`` ...).
+    size : int
+        Number of points along the axis.
+    step : float or None
+        Spacing of the points in ``unit``, where the file states one.
+    """
+
+    name: str
+    unit: str
+    size: int
+    step: float | None = None
+
+    def describe(self) -> str:
+        """One phrase: ``x 256 x 0.0117680 um``."""
+        step = f" x {self.step:.6g}" if self.step is not None else ""
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{self.name} {self.size}{step}{unit}"
+
+
+@dataclass
+class Frame:
+    """One stored block of a multi-frame file (NT-MDT ``.mdt``), as ``inspect`` lists it.
+
+    Attributes
+    ----------
+    index : int
+        Position in the file, from 0.
+    type_code : int
+        The vendor's frame type number.
+    kind : str
+        What the type is (``"text"``, ``"MDA image"`` ...).
+    title : str
+        The frame's own title.
+    shape : tuple of int
+        Shape of the data (``(lines, pixels)`` for images); empty if it holds none.
+    unit : str
+        Unit of the data values.
+    axes : list of Axis
+        The data's axes (fast axis first).
+    note : str
+        Anything else worth one phrase (text content, what was not read).
+    """
+
+    index: int
+    type_code: int
+    kind: str
+    title: str = ""
+    shape: tuple[int, ...] = ()
+    unit: str = ""
+    axes: list[Axis] = field(default_factory=list)
+    note: str = ""
+
+    def describe(self) -> str:
+        """One line: index, type, title, shape and unit, axes, note."""
+        parts = [f"frame {self.index}: type {self.type_code} ({self.kind})"
+                 + (f" '{self.title}'" if self.title else "")]
+        if self.shape:
+            parts.append("x".join(str(n) for n in self.shape)
+                         + (f" {self.unit}" if self.unit else ""))
+        if self.axes:
+            parts.append("axes " + ", ".join(a.describe() for a in self.axes))
+        if self.note:
+            parts.append(self.note)
+        return "; ".join(parts)
+
+
+@dataclass
 class ScanFile:
     """Everything a vendor reader extracts from one file.
 
@@ -85,6 +160,8 @@ class ScanFile:
     meta : dict
         Acquisition metadata: ``scan_rate_hz``, ``velocity_nm_per_s``, ``load``,
         ``load_unit``, ``calibration_nN_per_V``, ``lattice_nm`` ... where known.
+    frames : list of Frame
+        For multi-frame formats (NT-MDT): every stored block, data or not.
     """
 
     path: Path
@@ -92,6 +169,7 @@ class ScanFile:
     channels: list[Channel] = field(default_factory=list)
     scan_size_nm: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    frames: list[Frame] = field(default_factory=list)
 
     def lateral(self) -> list[Channel]:
         """The lateral-force channels, in file order."""
@@ -137,15 +215,15 @@ def length_to_nm(value: float, unit: str) -> float:
         raise ValueError(f"unknown length unit '{unit}'") from None
 
 
-def optional_import(module: str, path: Path) -> ModuleType:
-    """Import a third-party reader of the ``formats`` extra, or raise a one-line error."""
+def optional_import(module: str, path: Path, extra: str = "formats") -> ModuleType:
+    """Import a third-party reader of an optional extra, or raise a one-line error."""
     try:
         return importlib.import_module(module)
     except ImportError:
         raise TraceReadError(
             path,
             f"reading {path.suffix or path.name} files needs the optional extra: "
-            "pip install 'stickslip[formats]'",
+            f"pip install 'stickslip[{extra}]'",
         ) from None
 
 

@@ -1,0 +1,69 @@
+"""Loading an estimator by name or file: the model file knows its kind.
+
+``load_estimator(None)`` (or ``"default"``) is the bundled whole-line model, the one
+default of every command; ``"classical"`` the classical estimator; ``"window"`` (or
+``"paper"``) the bundled paper window MLP; anything else a model file, dispatched on
+the ``format`` it stores.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from stickslip.estimators.base import Estimator
+from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.line.estimator import LineEstimator
+from stickslip.estimators.line.modelfile import FORMAT as LINE_FORMAT
+from stickslip.estimators.line.modelfile import line_from_payload, load_line_model
+from stickslip.estimators.window.estimator import WindowEstimator
+from stickslip.estimators.window.modelfile import FORMAT as WINDOW_FORMAT
+from stickslip.estimators.window.modelfile import (
+    ModelFileError,
+    from_payload,
+    load_model,
+    read_payload,
+)
+
+DEFAULT = "default"
+CLASSICAL = "classical"
+WINDOW_NAMES = ("window", "paper", "window-pi")
+NAMES = (DEFAULT, CLASSICAL, *WINDOW_NAMES)
+
+# the model-file kinds: format string -> (payload -> estimator)
+KINDS: dict[str, Callable[[dict[str, Any], str], Estimator]] = {
+    LINE_FORMAT: lambda payload, name: LineEstimator(line_from_payload(payload, name), name),
+    WINDOW_FORMAT: lambda payload, name: WindowEstimator(from_payload(payload, name), name),
+}
+
+
+def load_estimator(spec: str | os.PathLike | None = None) -> Estimator:
+    """An estimator from a name or a model file.
+
+    Parameters
+    ----------
+    spec : str or path-like, optional
+        None or ``"default"``: the bundled whole-line model; ``"classical"``; ``"window"``
+        / ``"paper"``: the bundled paper MLP (pi input); else a model file from
+        ``stickslip train``, of any kind.
+
+    Raises
+    ------
+    ModelFileError
+        One line: missing, unreadable, or not a stickslip model file.
+    """
+    name = None if spec is None else str(spec)
+    if name in (None, DEFAULT):
+        return LineEstimator(load_line_model(None), "bundled")
+    if name == CLASSICAL:
+        return ClassicalEstimator()
+    if name in WINDOW_NAMES and not Path(name).exists():
+        return WindowEstimator(load_model(None), "bundled")
+    payload = read_payload(Path(name))
+    kind = KINDS.get(str(payload.get("format")))
+    if kind is None:
+        raise ModelFileError(f"{name}: model format '{payload.get('format')}' is not one of "
+                             f"{', '.join(KINDS)}")  # fmt: skip
+    return kind(payload, name)

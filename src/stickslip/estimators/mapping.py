@@ -1,0 +1,86 @@
+"""The one lattice mapping: a trace on lattice ``a`` read as one on the reference ``a0``.
+
+The PT model is self-similar in the lattice spacing. Substituting ``x = s x'`` with
+``s = a / a0`` and keeping the force unchanged turns a trace on lattice ``a`` with
+``(U0, K)`` into one on ``a0`` with ``U0' = U0 / s`` and ``K' = K s``: ``F_max = pi U0 / a``,
+the stick slope ``K eta / (1 + eta)`` and ``eta = 2 pi^2 U0 / (K a^2)`` are all preserved.
+So positions are divided by ``s``, the trace is resampled (pixel means) onto the
+reference pixel, an estimator reads it, and ``U0 = U0' s``, ``K = K' / s`` map the answer
+back. Exact in the athermal limit; the scan velocity and the temperature act only
+through thermal activation, which the mapping does not carry over (docs/learning.md
+gives the error this leaves). Every learned estimator maps through this module.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stickslip.conditions import Reference
+
+PIXEL_TOLERANCE = 1e-3  # relative pixel-size mismatch below which no resampling is done
+MAX_PIXEL_RATIO = 4.0  # coarser pixels (under ~3 per lattice spacing) cannot be read
+
+
+def resample_mean(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float) -> np.ndarray:
+    """Resample a recorded line onto pixels of ``pixel_nm``, each the mean force over its travel.
+
+    A recorded sample ``i`` is the mean force over its pixel's travel ``[x_i, x_{i+1}]``
+    (the last one as wide as its predecessor), which fixes the integral of the force over
+    every union of pixels. The new pixel ``[x_0 + j d, x_0 + (j + 1) d]`` gets the mean of
+    that integral, taking the force as constant inside each recorded pixel (exact
+    wherever a new pixel edge falls on a recorded one). Pixels that would run past the
+    line are dropped.
+    """
+    x = np.asarray(x_nm, dtype=float)
+    f = np.asarray(force_nN, dtype=float)
+    edges = np.append(x, x[-1] + (x[-1] - x[-2]))
+    n_new = int(np.floor((edges[-1] - edges[0]) / pixel_nm + 1e-9))
+    if n_new < 1:
+        return np.empty(0)
+    cum = np.concatenate([[0.0], np.cumsum(f * np.diff(edges))])
+    new_edges = edges[0] + np.arange(n_new + 1) * pixel_nm
+    return np.diff(np.interp(new_edges, edges, cum)) / pixel_nm
+
+
+def lattice_ratio(lattice_nm: float | np.ndarray, reference: Reference) -> np.ndarray:
+    """``s = a / a0``."""
+    return np.asarray(lattice_nm, dtype=float) / reference.lattice_nm
+
+
+def to_reference(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float,
+                 reference: Reference) -> np.ndarray:  # fmt: skip
+    """The force of a trace on the reference lattice and pixel (1-D array).
+
+    Positions are divided by ``s = a / a0``; a line already on the reference pixel
+    (every step within 0.1 % of it) is returned as it is, any other is resampled
+    (:func:`resample_mean`).
+    """
+    s = float(lattice_nm) / reference.lattice_nm
+    x = np.asarray(x_nm, float) / s
+    f = np.asarray(force_nN, float)
+    step = np.diff(x)
+    if step.size and np.all(np.abs(step / reference.pixel_nm - 1.0) < PIXEL_TOLERANCE):
+        return f
+    return resample_mean(x, f, reference.pixel_nm)
+
+
+def refusal(x_nm: np.ndarray, lattice_nm: float, reference: Reference,
+            min_pixels: int) -> str | None:  # fmt: skip
+    """Why a trace cannot be mapped and read (one line), or None when it can.
+
+    Refused: pixels coarser than ``MAX_PIXEL_RATIO`` reference pixels (fewer than ~3 per
+    lattice spacing), or fewer than ``min_pixels`` pixels once mapped.
+    """
+    x = np.asarray(x_nm, float)
+    s = float(lattice_nm) / reference.lattice_nm
+    span = float(x[-1] - x[0])
+    pixel = span / max(x.size - 1, 1)
+    limit = MAX_PIXEL_RATIO * reference.pixel_nm * s
+    if pixel > limit:
+        return (f"pixel {pixel:.3g} nm does not resolve the {lattice_nm:.3g} nm lattice "
+                f"(pixels <= {limit:.3g} nm needed)")  # fmt: skip
+    mapped = span / s / reference.pixel_nm
+    if mapped < min_pixels:
+        return (f"too short: covers {span:.3g} nm, {mapped:.0f} reference pixels; at least "
+                f"{min_pixels} ({min_pixels * reference.pixel_nm * s:.3g} nm) needed")  # fmt: skip
+    return None

@@ -1,0 +1,266 @@
+"""The ``infer`` and ``label`` job: files in, one result table (and plots) out.
+
+``label`` is this job with the classical estimator. The job reads every input (an
+unreadable one becomes a row with its reason), runs the estimator through the one
+interface (:class:`~stickslip.estimators.base.Estimator`), adds the classical
+estimator's columns beside a learned one (``classical_*``), optionally runs the
+posterior predictive check, and returns everything; :func:`write_outputs` writes the
+table, the per-load summary and the panels.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import zlib
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stickslip.diagnostics.loads import write_load_report
+from stickslip.diagnostics.plots import window_panels
+from stickslip.diagnostics.plots_classical import plot_trace_diagnostics
+from stickslip.diagnostics.ppc import plot_overlay, posterior_predictive_check
+from stickslip.estimators.base import Estimator
+from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.classical.slips import analyse_trace
+from stickslip.estimators.table import OK, ResultTable, failure_row
+from stickslip.traces.readers import collect_traces
+from stickslip.traces.trace import Trace, TraceReadError
+
+CLASSICAL_BESIDE = ("F_mean_nN", "U0_eV", "K_N_m", "eta", "regime", "quality")
+Progress = Callable[[int], None]
+
+
+@dataclass
+class InferResult:
+    """What the job produced.
+
+    Attributes
+    ----------
+    table : ResultTable
+        One row per trace, then one per unreadable input.
+    traces : list of Trace or None
+        Aligned with ``table.rows``: the trace behind each row (None for an input that
+        could not be read).
+    read_errors : list of TraceReadError
+        Inputs that could not be read.
+    replicates : dict
+        Row index -> the PT model simulated at the estimate (after ``check``).
+    """
+
+    table: ResultTable
+    traces: list[Trace | None]
+    read_errors: list[TraceReadError] = field(default_factory=list)
+    replicates: dict[int, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def refused(self) -> list[int]:
+        """Rows without an estimate (unreadable inputs, traces the estimator refused)."""
+        return [i for i, r in enumerate(self.table.rows) if "U0_eV" not in r]
+
+    def error_lines(self) -> list[str]:
+        """One line per unreadable input, and per file and reason for refused traces
+        (a map whose 300 lines fail the same way gives one line with the count)."""
+        lines = [str(e) for e in self.read_errors]
+        groups: Counter[tuple[str, str]] = Counter()
+        first: dict[tuple[str, str], str] = {}
+        for i in self.refused:
+            row, tr = self.table.rows[i], self.traces[i]
+            if tr is None:
+                continue
+            key = (tr.source or row["trace"], str(row["quality"]))
+            groups[key] += 1
+            first.setdefault(key, row["trace"])
+        for (src, reason), n in groups.items():
+            lines.append(f"{src}: {n} lines: {reason}" if n > 1 else f"{first[(src, reason)]}: "
+                         f"{reason}")  # fmt: skip
+        return lines
+
+
+def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None
+                ) -> tuple[list[Trace], list[TraceReadError]]:  # fmt: skip
+    """Every trace the inputs hold, and one error per input that cannot be read."""
+    return collect_traces(list(paths), **(reader_options or {}))
+
+
+def infer(
+    estimator: Estimator,
+    traces: Sequence[Trace],
+    read_errors: Sequence[TraceReadError] = (),
+    *,
+    lattice_nm: float | None = None,
+    velocity_nm_per_s: float | None = None,
+    temperature_K: float | None = None,
+    classical: bool = True,
+    check: bool = False,
+    progress: Progress | None = None,
+) -> InferResult:
+    """Run an estimator on traces; see the module docstring.
+
+    Parameters
+    ----------
+    estimator : Estimator
+        Any estimator (:func:`stickslip.estimators.load.load_estimator`).
+    traces : sequence of Trace
+        Traces read from the inputs (:func:`read_inputs`).
+    read_errors : sequence of TraceReadError
+        Inputs that could not be read: each becomes a row with its reason.
+    lattice_nm, velocity_nm_per_s, temperature_K : float, optional
+        User-given conditions (they win over the files' metadata).
+    classical : bool
+        Add the classical estimator's columns beside a learned estimator's.
+    check : bool
+        Posterior predictive check of every estimated trace (``gof``, ``ppc_flag``).
+    progress : callable, optional
+        Called with the number of traces checked so far (long checks).
+    """
+    traces = list(traces)
+    flags = {"lattice_nm": lattice_nm, "velocity_nm_per_s": velocity_nm_per_s,
+             "temperature_K": temperature_K}  # fmt: skip
+    table = estimator.predict(traces, **flags)
+    if classical and estimator.kind != "classical" and traces:
+        beside = ClassicalEstimator().predict(traces, **flags)
+        for row, cl in zip(table.rows, beside.rows, strict=True):
+            row.update({f"classical_{k}": cl.get(k) for k in CLASSICAL_BESIDE})
+    result = InferResult(table=table, traces=[*traces])
+    if check:
+        result.replicates = _check(table, traces, progress)
+    for e in read_errors:
+        table.rows.append(failure_row(Path(e.path).stem, e.reason, estimator.name, file=e.path))
+        result.traces.append(None)
+    result.read_errors = list(read_errors)
+    return result
+
+
+def ppc_seed(name: str) -> int:
+    """A replicate seed of the trace's own (never the simulator's default seed 0, so a
+    simulated trace is not compared with its own noise)."""
+    return 1_000_003 + zlib.crc32(name.encode())
+
+
+def _check(table: ResultTable, traces: Sequence[Trace], progress: Progress | None
+           ) -> dict[int, np.ndarray]:  # fmt: skip
+    """Posterior predictive check of the estimated rows, batched by trace length."""
+    todo = [i for i, row in enumerate(table.rows[: len(traces)])
+            if row.get("quality") == OK and np.isfinite(row.get("U0_eV", np.nan))]  # fmt: skip
+    reps: dict[int, np.ndarray] = {}
+    sizes = Counter(traces[i].n for i in todo)
+    done = 0
+    for size in sizes:
+        idx = [i for i in todo if traces[i].n == size]
+        rows = [table.rows[i] for i in idx]
+        r = posterior_predictive_check(
+            traces[idx[0]].x_nm, np.stack([traces[i].force_nN for i in idx]),
+            np.array([row["U0_eV"] for row in rows]), np.array([row["K_N_m"] for row in rows]),
+            lattice_nm=np.array([row["lattice_nm"] for row in rows]),
+            velocity_nm_per_s=np.array([row["velocity_nm_per_s"] for row in rows]),
+            temperature_K=np.array([row["temperature_K"] for row in rows]),
+            seed=ppc_seed(traces[idx[0]].name),
+        )  # fmt: skip
+        for k, (i, row) in enumerate(zip(idx, rows, strict=True)):
+            row["gof"] = float(r.gof[k])
+            row["ppc_flag"] = int(r.flagged[k])
+            reps[i] = r.replicate_nN[k]
+        done += len(idx)
+        if progress is not None:
+            progress(done)
+    return reps
+
+
+def write_outputs(result: InferResult, out: str | os.PathLike, title: str = "estimates"
+                  ) -> list[Path]:  # fmt: skip
+    """Write the table (format from the extension) and, where lines carry loads, the
+    per-load summary beside it; returns the paths written."""
+    written = [result.table.write(out)]
+    estimated = [r for r in result.table.rows if "U0_eV" in r]
+    written += write_load_report(estimated, out, f"{title} versus load")
+    return written
+
+
+def safe_name(name: str) -> str:
+    """A file-name-safe version of a trace name (no colons or slashes: valid on every OS)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "trace"
+
+
+def _interval(row: dict[str, Any], key: str, unit: str) -> str:
+    lo, hi = row.get(f"{key}_lo95"), row.get(f"{key}_hi95")
+    text = f"{key.split('_')[0]} = {row[key]:.3g} {unit}"
+    return text + (f" [{lo:.3g}, {hi:.3g}]" if lo is not None and hi is not None else "")
+
+
+def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.PathLike
+                 ) -> list[Path]:  # fmt: skip
+    """One PNG per estimated trace in ``out_dir``, drawn for the estimator's kind:
+    classical (stick fits and slips), window (window-wise estimates), line (the trace,
+    and after a check the PT model at the estimate; 95 % intervals in the title)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: list[Path] = []
+    rows = [(i, r, t) for i, (r, t) in enumerate(zip(result.table.rows, result.traces,
+                                                     strict=True)) if t is not None]  # fmt: skip
+    if estimator.kind == "window":
+        idx = [i for i, r, _ in rows if "U0_eV" in r]
+        ests, _ = estimator.window_estimates(  # type: ignore[attr-defined]
+            [result.traces[i] for i in idx],
+            [result.table.rows[i]["lattice_nm"] for i in idx])
+        by_row = dict(zip(idx, ests, strict=True))
+    for n, (i, row, t) in enumerate(rows):
+        path = out / f"{n:03d}_{safe_name(row['trace'])}.png"
+        if estimator.kind == "classical":
+            plot_trace_diagnostics(path, t.x_nm, t.force_nN, analyse_trace(t.x_nm, t.force_nN),
+                                   row)  # fmt: skip
+        elif estimator.kind == "window" and i in by_row:
+            e = by_row[i]
+            ref = {k: float(row.get(f"classical_{k}") or np.nan) for k in ("U0_eV", "K_N_m", "eta")}
+            window_panels(t.x_nm, t.force_nN, e.centres_nm, e.windows, e.values, path,
+                          title=row["trace"], reference=ref)  # fmt: skip
+        elif "U0_eV" in row:
+            title = (f"{row['trace']}: {_interval(row, 'U0_eV', 'eV')}, "
+                     f"{_interval(row, 'K_N_m', 'N/m')}, eta = {row['eta']:.3g}")  # fmt: skip
+            if estimator.intervals:
+                title += " (95 % intervals)"
+            if "gof" in row:
+                title += f", gof = {row['gof']:.2f}{' FLAGGED' if row['ppc_flag'] else ''}"
+            plot_overlay(t.x_nm, t.force_nN, result.replicates.get(i), title, path)
+        else:
+            continue
+        paths.append(path)
+    return paths
+
+
+def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit: int = 40) -> str:
+    """A compact terminal table of the estimated rows: estimates, +- their std (or the
+    95 % interval), the classical estimator's U0 and K beside, true values if known."""
+    rows = table.ok()
+    w = min(max([len(r["trace"]) for r in rows] + [5]), 40) + 1
+    has_cl = any("classical_U0_eV" in r for r in rows)
+    head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>16}{'K N/m':>16}{'eta':>8}"
+    head += f"{'gof':>6}" if any("gof" in r for r in rows) else ""
+    head += f"{'| classical U0':>15}{'K':>8}" if has_cl else ""
+    head += f"{'| true U0':>10}{'K':>7}" if truth else ""
+    lines = [head]
+
+    def num(v: Any) -> float:
+        return float(v) if isinstance(v, (int, float, np.number)) and v is not None else np.nan
+
+    for r in rows[:limit]:
+        s = (f"{r['trace'][: w - 1]:<{w}}{num(r['F_mean_nN']):>9.3f}"
+             f"{num(r['U0_eV']):>9.3f}+-{num(r.get('U0_eV_std')):<5.2f}"
+             f"{num(r['K_N_m']):>9.2f}+-{num(r.get('K_N_m_std')):<5.2f}"
+             f"{num(r['eta']):>8.2f}")
+        if "gof" in r:
+            s += f"{r['gof']:>5.1f}{'!' if r.get('ppc_flag') else ' '}"
+        if has_cl:
+            s += f"{num(r.get('classical_U0_eV')):>15.3f}{num(r.get('classical_K_N_m')):>8.2f}"
+        if truth and r["trace"] in truth:
+            t = truth[r["trace"]]
+            s += f"{t.get('U0_eV', np.nan):>10.3f}{t.get('K_N_m', np.nan):>7.2f}"
+        lines.append(s)
+    if len(rows) > limit:
+        lines.append(f"... {len(rows) - limit} more rows in the table")
+    return "\n".join(lines)
