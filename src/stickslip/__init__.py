@@ -1,20 +1,43 @@
 """stickslip: Prandtl-Tomlinson parameters from atomic-scale stick-slip friction traces.
 
-Subpackages follow the pipeline:
+Subpackages follow the pipeline, each importing only those before it:
 
-- :mod:`stickslip.simulators` -- finite-temperature PT simulator and datasets,
-- :mod:`stickslip.traces` -- trace formats and I/O,
-- :mod:`stickslip.estimators.classical` -- classical (slip-detection) estimator,
-- :mod:`stickslip.learning` -- features, networks, training and inference,
-- :mod:`stickslip.evaluation` -- metrics, plots and reports,
-- :mod:`stickslip.cli` -- the ``stickslip`` command.
+- :mod:`stickslip.traces` -- the trace, readers of plain and vendor files, datasets,
+- :mod:`stickslip.simulators` -- the finite-temperature PT simulator, sweeps, effects,
+- :mod:`stickslip.estimators` -- one interface (:class:`Estimator`) for the classical
+  estimator, the paper's window MLP and the whole-line ensemble; the result table,
+- :mod:`stickslip.diagnostics` -- metrics, coverage, posterior predictive checks, plots,
+  reports,
+- :mod:`stickslip.jobs` -- what each command does, returning tables,
+- :mod:`stickslip.cli` -- the ``stickslip`` command (argument parsing only).
+
+The functions below (:mod:`stickslip.api`) mirror the command line.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from stickslip._version import __version__
+from stickslip.api import evaluate, predict, read_traces, train
+from stickslip.conditions import GRAPHITE, Conditions, Reference
+from stickslip.estimators.base import Estimator
+from stickslip.estimators.load import load_estimator
+from stickslip.estimators.table import ResultTable
+from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
+from stickslip.traces.trace import Trace
 
-try:
-    __version__ = version("stickslip")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+unknown"
-
-__all__ = ["__version__"]
+__all__ = [
+    "GRAPHITE",
+    "Conditions",
+    "Estimator",
+    "PhysicalSettings",
+    "Reference",
+    "ResultTable",
+    "SweepConfig",
+    "Trace",
+    "__version__",
+    "evaluate",
+    "load_estimator",
+    "predict",
+    "read_traces",
+    "run_sweep",
+    "simulate",
+    "train",
+]

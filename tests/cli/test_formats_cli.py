@@ -50,7 +50,7 @@ def test_inspect_real_map_and_bad_files(ramp, tmp_path):
     assert "exampleFrictionProfileFull:Friction:retrace:L000" in out  # later files still read
     errors = _error_lines(r)
     assert len(errors) == 3
-    assert any("si.0_00143.spm: no lateral-force image channels" in e for e in errors)
+    assert any("si.0_00143.spm: no lateral-force channel" in e for e in errors)
     assert any("empty.csv: empty file" in e for e in errors)
     assert any("junk.spm: not a Bruker NanoScope file" in e for e in errors)
 

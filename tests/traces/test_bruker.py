@@ -83,7 +83,7 @@ def test_half_difference_rises_with_setpoint(ramp_dir):
 
 
 def test_force_curve_is_a_clean_error(ramp_dir):
-    with pytest.raises(TraceReadError, match="no lateral-force image channels") as e:
+    with pytest.raises(TraceReadError, match="no lateral-force channel") as e:
         read_file(ramp_dir / "si.0_00143.spm")
     assert "\n" not in str(e.value)
 

@@ -139,7 +139,7 @@ def test_real_file_data_match_the_stated_data_offset(gaas):
 
 
 def test_real_file_gives_no_traces(gaas):
-    with pytest.raises(TraceReadError, match=r"no lateral-force image channels \(found: Iprobe"):
+    with pytest.raises(TraceReadError, match=r"no lateral-force channel \(found: Iprobe"):
         read_file(gaas)
 
 
@@ -168,7 +168,7 @@ def test_cli_label_and_infer_refuse_in_one_line(gaas, tmp_path, command):
     assert r.exit_code == 1
     errors = _error_lines(r)
     assert len(errors) == 1, r.stderr
-    assert "GaAs_map.mdt: no lateral-force image channels" in errors[0]
+    assert "GaAs_map.mdt: no lateral-force channel" in errors[0]
     assert "Traceback" not in r.stderr + r.stdout
 
 

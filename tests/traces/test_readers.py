@@ -189,7 +189,7 @@ def test_stored_calibration_wins_and_newton_channels_convert():
 def test_no_lateral_channel_is_an_error():
     scan = _scan()
     scan.channels = scan.channels[:1]
-    with pytest.raises(TraceReadError, match=r"no lateral-force image channels \(found: Height"):
+    with pytest.raises(TraceReadError, match=r"no lateral-force channel \(found: Height"):
         map_to_traces(scan)
 
 
@@ -250,7 +250,7 @@ def test_gwyddion_written_with_gwyfile(tmp_path):
     d["/0/data"] = objects.GwyDataField(rng.random((4, N)))
     d["/0/data/title"] = "Height"
     d.tofile(str(tmp_path / "height.gwy"))
-    with pytest.raises(TraceReadError, match="no lateral-force image channels"):
+    with pytest.raises(TraceReadError, match="no lateral-force channel"):
         read_file(tmp_path / "height.gwy")
 
 

@@ -6,6 +6,7 @@ Every command runs an estimator through the one interface
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import typer
@@ -43,6 +44,7 @@ MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'class
 OUT_HELP = "Result table; the format follows the extension: .csv, .json or .parquet."
 LATTICE_HELP = "Lattice spacing a in nm (wins over the file's; default: the estimator's, 0.246)."
 VELOCITY_HELP = "Scan velocity in nm/s (wins over the file's; default: the estimator's, 60)."
+REPORT_HELP = "Also write one self-contained HTML report of the run (opens offline)."
 TEMPERATURE_HELP = "Temperature in K (wins over the file's; default: the estimator's, 296)."
 
 
@@ -76,10 +78,13 @@ def run_estimation(
     estimator: Estimator, traces: list[str], out: Path, *, lattice: float | None,
     velocity: float | None, temperature: float | None, calibration: float | None,
     lines_per_load: int | None, loads: str | None, plots: Path | None, classical: bool,
-    check: bool, truth: dict | None = None, examples: bool = False,
+    check: bool, truth: dict | None = None, examples: bool = False, report: Path | None = None,
 ) -> int:  # fmt: skip
     """The shared body of ``infer``, ``label`` and ``demo``; returns the exit code."""
     _check_out(out)
+    if report is not None and (report.suffix.lower() not in (".html", ".htm")
+                               or not report.parent.exists()):  # fmt: skip
+        usage_error(f"{report}: --report needs an .html file in an existing folder")
     _check_conditions(lattice, velocity, temperature)
     opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
     if examples:
@@ -106,6 +111,8 @@ def run_estimation(
     if plots is not None:
         panels = inf.write_panels(result, estimator, plots)
         info(f"wrote {len(panels)} panels in {plots}")
+    if report is not None:
+        written.append(inf.write_run_report(result, estimator, report, traces, sys.argv))
     n_flag = len(result.table.rows) - len(ok) - len(result.refused)
     info(f"{len(ok)} ok, {n_flag} flagged, {len(result.refused)} without an estimate -> "
          + ", ".join(str(p) for p in written))
@@ -133,6 +140,7 @@ def infer_cmd(
     check: bool = typer.Option(
         False, "--check", help="Re-simulate each trace at its estimate and report a goodness "
         "of fit (gof, ppc_flag); with --plots the overlay is drawn."),
+    report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
 ) -> None:
     """Estimate <F>, U0, K and eta of every trace, with any estimator.
 
@@ -145,7 +153,7 @@ def infer_cmd(
     code = run_estimation(
         _estimator(model), traces, out, lattice=lattice, velocity=velocity,
         temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
-        loads=loads, plots=plots, classical=classical, check=check,
+        loads=loads, plots=plots, classical=classical, check=check, report=report,
     )  # fmt: skip
     raise typer.Exit(code)
 
@@ -162,6 +170,7 @@ def label_cmd(
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
     lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
     loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
+    report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
 ) -> None:
     """Label traces with the classical stick-slip estimator ('infer --model classical').
 
@@ -174,7 +183,7 @@ def label_cmd(
     code = run_estimation(
         load_estimator("classical"), traces, out, lattice=lattice, velocity=velocity,
         temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
-        loads=loads, plots=plots, classical=False, check=False,
+        loads=loads, plots=plots, classical=False, check=False, report=report,
     )  # fmt: skip
     raise typer.Exit(code)
 

@@ -25,6 +25,7 @@ from stickslip.diagnostics.loads import write_load_report
 from stickslip.diagnostics.plots import window_panels
 from stickslip.diagnostics.plots_classical import plot_trace_diagnostics
 from stickslip.diagnostics.ppc import plot_overlay, posterior_predictive_check
+from stickslip.diagnostics.report_html import write_report
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.slips import analyse_trace
@@ -264,3 +265,28 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
     if len(rows) > limit:
         lines.append(f"... {len(rows) - limit} more rows in the table")
     return "\n".join(lines)
+
+
+def write_run_report(result: InferResult, estimator: Estimator, path: str | os.PathLike,
+                     inputs: Sequence[str | os.PathLike], command: Sequence[str] = ()
+                     ) -> Path:  # fmt: skip
+    """The run's self-contained HTML report (:mod:`stickslip.diagnostics.report_html`)."""
+    rows = result.table.rows
+    conditions: dict[str, Any] = {}
+    for q in ("lattice_nm", "velocity_nm_per_s", "temperature_K"):
+        src = q.split("_")[0] + "_source"
+        seen = Counter((r.get(q), r.get(src)) for r in rows if r.get(q) is not None)
+        if seen:
+            (value, source), _ = seen.most_common(1)[0]
+            conditions[q] = {"value": value, "source": source}
+    info = {
+        "files": [str(p) for p in inputs],
+        "estimator": f"{estimator.name}: {estimator.describe()}",
+        "model": getattr(estimator, "source", estimator.name),
+        "conditions": conditions,
+        "unreadable": [(e.path, e.reason) for e in result.read_errors],
+        "command": list(command),
+    }
+    traces = [t for t in result.traces if t is not None]
+    overlays = {rows[i]["trace"]: rep for i, rep in result.replicates.items()}
+    return write_report(path, result.table, traces, info, overlays)

@@ -248,16 +248,20 @@ def run_friction_velocity(
     sem = vel.line_sem(np.array([vel_value(r, "F_peak_nN_std") for r in ok]),
                        np.array([vel_value(r, "n_slips") for r in ok]))  # fmt: skip
     report.peak = vel.group_by_velocity(v, peak, sem)
-    report.mean = vel.group_by_velocity(v, np.array([vel_value(r, "F_mean_nN") for r in ok]))
+    # <F>: one line's error is the spread of its per-cycle mean force over sqrt(cycles)
+    mean_sem = vel.line_sem(np.array([vel_value(r, "F_mean_nN_std") for r in ok]),
+                            np.array([vel_value(r, "n_slips") for r in ok]) - 1)  # fmt: skip
+    report.mean = vel.group_by_velocity(v, np.array([vel_value(r, "F_mean_nN") for r in ok]),
+                                        mean_sem)  # fmt: skip
     report.U0_eV, report.K_N_m = _median(ok, "U0_eV"), _median(ok, "K_N_m")
     report.k_exp_N_m = _median(ok, "k_exp_N_m")
-    try:
-        report.peak_fit = vel.fit_thermal_law(report.peak.velocity_nm_per_s, report.peak.mean,
-                                              report.peak.sem, temperature_K)  # fmt: skip
-        report.mean_fit = vel.fit_thermal_law(report.mean.velocity_nm_per_s, report.mean.mean,
-                                              report.mean.sem, temperature_K, "F_mean_nN")
-    except ValueError as e:
-        report.notes.append(f"no law fitted: {e}")
+    for attr, g, name in (("peak_fit", report.peak, "F_peak_nN"),
+                          ("mean_fit", report.mean, "F_mean_nN")):  # fmt: skip
+        try:
+            setattr(report, attr, vel.fit_thermal_law(g.velocity_nm_per_s, g.mean, g.sem,
+                                                      temperature_K, name))  # fmt: skip
+        except ValueError as e:
+            report.notes.append(f"no law fitted to {name}: {e}")
     if check and math.isfinite(report.U0_eV) and math.isfinite(report.K_N_m):
         s = vel.simulated_series(report.U0_eV, report.K_N_m, report.peak.velocity_nm_per_s,
                                  lattice_nm=lattice_nm, temperature_K=temperature_K,

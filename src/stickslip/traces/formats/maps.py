@@ -231,7 +231,7 @@ def map_to_traces(
     if not lateral:
         found = ", ".join(f"{c.name} ({c.direction or '?'})" for c in scan.channels)
         found = f"found: {found}" if found else "no image channels: a force curve or spectrum?"
-        raise TraceReadError(path, f"no lateral-force image channels ({found})")
+        raise TraceReadError(path, f"no lateral-force channel ({found})")
     cal = scan.meta.get("calibration_nN_per_V") or calibration_nN_per_V
     size = scan.scan_size_nm or scan_size_nm
     traces: list[Trace] = []

@@ -1,0 +1,49 @@
+"""Training data: labelled traces mapped onto the reference, and mixing fractions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stickslip.conditions import GRAPHITE
+from stickslip.jobs.train import TrainingData, TrainingDataError, labelled_dataset, mix_in
+from stickslip.simulators import PhysicalSettings, simulate
+from stickslip.traces.dataset import Dataset
+from stickslip.traces.trace import Trace
+
+
+@pytest.fixture(scope="module")
+def mos2():
+    r = simulate([2.0, 3.0], [15.0, 20.0], PhysicalSettings(lattice_nm=0.316), seed=5)
+    return [Trace(r.x_nm, r.force_nN[i], f"m{i}", "m.csv", {"lattice_nm": 0.316})
+            for i in range(2)]  # fmt: skip
+
+
+def test_labelled_traces_are_mapped_with_their_labels(mos2):
+    labels = {"m0": {"U0_eV": 2.0, "K_N_m": 15.0, "F_mean_nN": 1.0}, "m1": {"U0_eV": 3.0}}
+    notes = []
+    d = labelled_dataset(mos2, labels, GRAPHITE, pixels=400, echo=notes.append)
+    s = 0.316 / GRAPHITE.lattice_nm
+    # m1 has no K: left out, and said so
+    assert d.n == 1 and notes and "1 labelled-set trace" in notes[0]
+    assert d.params["U0_eV"][0] == pytest.approx(2.0 / s)
+    assert d.params["K_N_m"][0] == pytest.approx(15.0 * s)
+    # eta is invariant under the mapping
+    assert d.params["eta"][0] == pytest.approx(52.26 * 2.0 / 15.0 * GRAPHITE.lattice_nm**2
+                                               / 0.316**2 * 0.246**2 / 0.246**2, rel=1e-3)
+    assert d.force_nN.shape == (1, 400)
+    np.testing.assert_allclose(np.diff(d.x_nm), GRAPHITE.pixel_nm)
+    with pytest.raises(TrainingDataError):
+        labelled_dataset(mos2, {}, GRAPHITE)
+
+
+def test_mixing_reaches_the_asked_fraction():
+    def ds(n, value):
+        return Dataset(np.full((n, 8), value, np.float32), np.arange(8.0),
+                       {"U0_eV": np.full(n, value), "K_N_m": np.ones(n)}, {"config": "{}"})
+
+    mixed = mix_in(TrainingData(ds(990, 0.0)), ds(3, 1.0), 0.01)
+    real = np.count_nonzero(mixed.data.params["U0_eV"] == 1.0)
+    assert mixed.data.n == 1000 and real == 10
+    with pytest.raises(TrainingDataError):
+        mix_in(TrainingData(ds(10, 0.0)), ds(3, 1.0), 1.5)
