@@ -7,8 +7,8 @@ from importlib.resources import files
 import pytest
 
 from stickslip.diagnostics.metrics import TARGET_RMSE
-from stickslip.estimators.window.modelfile import DEFAULT_MODEL_NAME, load_model
 from stickslip.estimators.window.estimator import WindowEstimator
+from stickslip.estimators.window.modelfile import DEFAULT_MODEL_NAME, load_model
 from stickslip.jobs.evaluate import evaluate_dataset
 from stickslip.simulators import SweepConfig, run_sweep
 from stickslip.traces.dataset import load_dataset

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stickslip.estimators.window.estimator import WindowEstimator
 from stickslip.estimators.window.inference import map_trace, predict_array, predict_traces
 from stickslip.estimators.window.training import (
     TrainConfig,
@@ -13,7 +14,6 @@ from stickslip.estimators.window.training import (
     train_model,
     window_set,
 )
-from stickslip.estimators.window.estimator import WindowEstimator
 from stickslip.jobs.evaluate import evaluate_dataset
 from stickslip.traces.trace import Trace
 
