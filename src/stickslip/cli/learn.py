@@ -11,6 +11,7 @@ from pathlib import Path
 
 import typer
 
+from stickslip.cli.app import app
 from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
@@ -25,7 +26,6 @@ from stickslip.cli.common import (
     show_progress,
     usage_error,
 )
-from stickslip.cli.main import app
 from stickslip.conditions import GRAPHITE, check_values
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.line.training import LineTrainConfig

@@ -1,56 +1,11 @@
-"""Entry point: builds the Typer app from the command modules."""
+"""Entry point: the app with every command module's commands (imported for that)."""
 
 from __future__ import annotations
 
-import typer
+from stickslip.cli import formats, learn, simulate, velocity
+from stickslip.cli.app import app
 
-from stickslip._version import __version__
-from stickslip.cli.common import set_verbosity
-
-app = typer.Typer(
-    name="stickslip",
-    help=(
-        "Prandtl-Tomlinson parameters (U0, K, mean friction, eta, regime) from atomic-scale "
-        "stick-slip friction traces. Conventions: ../shared/PHYSICS.md, summarised in README."
-    ),
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
-
-
-def _version(value: bool) -> None:
-    if value:
-        typer.echo(f"stickslip {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: bool = typer.Option(
-        False, "--version", callback=_version, is_eager=True, help="Print the version."
-    ),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors (no status lines, "
-                               "tables or progress bars)."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="More status lines."),
-) -> None:
-    """stickslip command line."""
-    set_verbosity(0 if quiet else 2 if verbose else 1)
-
-
-def _register() -> None:
-    # Each module adds its commands to `app`; imported here so `app` is complete.
-    import importlib
-
-    for mod in ("simulate", "formats", "learn", "velocity"):
-        try:
-            importlib.import_module(f"stickslip.cli.{mod}")
-        except ModuleNotFoundError as e:
-            if e.name != f"stickslip.cli.{mod}":
-                raise
-
-
-_register()
+COMMAND_MODULES = (formats, learn, simulate, velocity)  # each adds its commands to `app`
 
 
 def main() -> None:
