@@ -2,29 +2,27 @@
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Any
 
 import typer
 
 from stickslip.atomic import write_text_atomic
+from stickslip.cli.app import app
 from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
     EXIT_OK,
     LOADS_HELP,
     LPL_HELP,
+    echo,
     error,
+    info,
     parse_loads_arg,
     reading_options,
     usage_error,
 )
-from stickslip.cli.main import app
-from stickslip.diagnostics.plots_load import plot_versus_load
 from stickslip.traces.formats.common import ScanFile
-from stickslip.traces.formats.maps import TRACE, summarise_by_load
 from stickslip.traces.readers import expand_paths, is_scan_file, read_file, read_scan
 from stickslip.traces.trace import Trace, TraceReadError
 
@@ -61,6 +59,9 @@ def _describe_scan(scan: ScanFile) -> list[str]:
             f"    {c.name:<20} {c.direction or '?':<8} {c.unit or '?':<4} "
             f"{c.shape[0]}x{c.shape[1]}{tag}"
         )
+    if scan.frames:
+        lines.append(f"  frames ({len(scan.frames)}):")
+        lines += [f"    {f.describe()}" for f in scan.frames]
     return lines
 
 
@@ -71,8 +72,13 @@ def _describe_traces(traces: list[Trace]) -> list[str]:
     if "V" in units:
         lines.append("    not calibrated: forces in volts; pass --calibration NN_PER_V")
     n = traces[0].n
-    lines.append(f"    {n} samples each, x from 0 to {traces[0].x_nm[-1]:.6g} "
-                 f"{traces[0].meta.get('x_unit', 'nm')}")
+    x_unit = traces[0].meta.get("x_unit", "nm")
+    lines.append(f"    {n} samples each, x from 0 to {traces[0].x_nm[-1]:.6g} {x_unit}"
+                 + (" (pixel index: no x axis in the file; --scan-size-nm NM)"
+                    if x_unit == "px" else ""))  # fmt: skip
+    masked = sum(1 for t in traces if t.meta.get("masked_pixels"))
+    if masked:
+        lines.append(f"    {masked} trace(s) with missing (NaN) pixels, interpolated")
     lines.append(f"    first: {traces[0].name}")
     if len(traces) > 1:
         lines.append(f"    last:  {traces[-1].name}")
@@ -103,7 +109,11 @@ def inspect_cmd(
         try:
             out = [f"{p}"]
             if is_scan_file(p):
-                out += _describe_scan(read_scan(p))
+                scan = read_scan(p)
+                out += _describe_scan(scan)
+                if scan.channels and not scan.lateral():  # an image, but not a friction map
+                    typer.echo("\n".join([*out, "  traces: none (no lateral-force channel)"]))
+                    continue
             traces = read_file(p, **opts)
             if not is_scan_file(p):
                 out.append(f"  format: {traces[0].meta.get('format', p.suffix.lstrip('.'))}")
@@ -114,33 +124,6 @@ def inspect_cmd(
             continue
         typer.echo("\n".join(out))
     raise typer.Exit(EXIT_FAILED_INPUT if failed else EXIT_OK)
-
-
-def _friction_rows(traces: list[Trace]) -> list[dict[str, Any]]:
-    return [
-        {
-            "file": t.meta.get("file", t.source),
-            "line": t.meta.get("line"),
-            "load": t.meta.get("load"),
-            "load_unit": t.meta.get("load_unit"),
-            "friction": t.meta["loop_friction"],
-            "offset": t.meta["loop_offset"],
-            "unit": t.meta.get("unit"),
-        }
-        for t in traces
-        if t.meta.get("direction") == TRACE and "loop_friction" in t.meta
-    ]
-
-
-def _csv_text(rows: list[dict[str, Any]], unit: str) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["load", "load_unit", "n_lines", f"friction_{unit}", f"friction_std_{unit}",
-                f"offset_{unit}"])
-    for r in rows:
-        w.writerow([f"{r['load']:.9g}", r["load_unit"] or "", r["n"], f"{r['friction_mean']:.9g}",
-                    f"{r['friction_std']:.9g}", f"{r['offset_mean']:.9g}"])
-    return buf.getvalue()
 
 
 @app.command("friction-load")
@@ -156,33 +139,51 @@ def friction_load_cmd(
     load_unit: str = typer.Option("nN", "--load-unit", help="Unit of --loads."),
     lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
+    fits: Path | None = typer.Option(
+        None, "--fits", help="Write the fitted laws, one row per parameter (.csv, .json, "
+                             ".parquet)."),
+    estimates: Path | None = typer.Option(
+        None, "--estimates",
+        help="Result table of label or infer on the same maps (CSV or JSON, with a load "
+             "column): U0 and K against load, with their intervals, under the friction."),
 ) -> None:
-    """Mean friction, half (trace - retrace), versus setpoint/load for a load ramp."""
+    """Mean friction, half (trace - retrace), versus setpoint/load for a load ramp.
+
+    Fits both the linear law F = mu L + F0 and the DMT-like F = c (L + L_adh)^(2/3), with
+    one-standard-deviation uncertainties and a goodness of fit each (printed to stderr,
+    drawn over the data, and with --fits written as a table); neither is chosen for you.
+    In a folder, force curves and files without a load are skipped with a note.
+    """
+    from stickslip.diagnostics import load_fits as lf
+    from stickslip.estimators.table import ResultTable, TableFormatError, table_format
+
     load_list = parse_loads_arg(loads)
     opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
                            None, load_unit)
-    paths, bad = expand_paths(files)
-    for e in bad:
-        error(str(e))
-    if load_list and not lines_per_load and len(load_list) != len(paths):
-        usage_error(f"--loads gives {len(load_list)} values for {len(paths)} files")
-    rows: list[dict[str, Any]] = []
-    failed = len(bad)
-    for i, p in enumerate(paths):
+    if fits is not None:
         try:
-            traces = read_file(p, **opts)
-            if load_list and not lines_per_load:
-                for t in traces:
-                    t.meta.update(load=load_list[i], load_unit=load_unit)
-            file_rows = _friction_rows(traces)
-            if not file_rows:
-                raise TraceReadError(p, "no trace/retrace pair to form a friction loop")
-            if all(r["load"] is None for r in file_rows):
-                raise TraceReadError(p, "load unknown (not stored in the file); pass --loads")
-            rows.extend(file_rows)
-        except TraceReadError as e:
+            table_format(fits)
+        except TableFormatError as e:
+            usage_error(str(e))
+    failed = 0
+    est_summary = None
+    if estimates is not None:
+        try:
+            est_summary = lf.estimates_by_load(lf.read_estimate_rows(estimates))
+        except ValueError as e:
             error(str(e))
             failed += 1
+    try:
+        found = lf.collect_friction_rows(files, opts, None if lines_per_load else load_list,
+                                         load_unit)
+    except ValueError as e:
+        usage_error(str(e))
+    for e in found.errors:
+        error(str(e))
+    for note in found.notes:
+        info(f"stickslip: note: {note}")
+    failed += len(found.errors)
+    rows = found.rows
     if rows:
         units = {r["unit"] for r in rows}
         load_units = {r["load_unit"] for r in rows}
@@ -190,13 +191,19 @@ def friction_load_cmd(
             error(f"mixed units across files (friction {sorted(map(str, units))}, "
                   f"load {sorted(map(str, load_units))}); pass --calibration or --loads")
             raise typer.Exit(EXIT_FAILED_INPUT)
-        unit = units.pop()
-        summary = summarise_by_load(rows, ["friction", "offset"])
-        text = _csv_text(summary, unit)
-        typer.echo(text, nl=False)
+        unit = str(units.pop())
+        load_unit_found = str(load_units.pop() or "")
+        summary = lf.summarise_friction(rows)
+        text = lf.summary_csv(summary, unit)
+        echo(text.rstrip("\n"))
         if csv_out is not None:
             write_text_atomic(csv_out, text)
-        plot_versus_load(summary, [("friction", f"friction, (trace - retrace)/2 ({unit})")], out,
-                         title="friction versus load")
+        laws, reason = lf.fit_or_reason(summary)
+        for law in laws:
+            info(law.summary(unit, load_unit_found))
+        if reason:
+            info(f"stickslip: note: {reason}")
+        lf.plot_friction_load(summary, laws, out, unit, est_summary)
+        if fits is not None and laws:
+            ResultTable(rows=lf.fits_rows(laws, unit, load_unit_found)).write(fits)
     raise typer.Exit(EXIT_FAILED_INPUT if failed or not rows else EXIT_OK)
-

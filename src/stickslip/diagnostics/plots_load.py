@@ -7,7 +7,18 @@ import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from stickslip.atomic import atomic_path
+
+
+def _bar(row: Mapping[str, Any], key: str, mean: float) -> tuple[float, float]:
+    """(below, above) error bar: the row's interval if it has one, else +- its std."""
+    lo, hi = row.get(f"{key}_lo"), row.get(f"{key}_hi")
+    if lo is not None and hi is not None and math.isfinite(mean):
+        return max(mean - lo, 0.0), max(hi - mean, 0.0)
+    std = row.get(f"{key}_std", math.nan)
+    return (0.0, 0.0) if math.isnan(std) else (std, std)
 
 
 def plot_versus_load(
@@ -15,8 +26,12 @@ def plot_versus_load(
     quantities: Sequence[tuple[str, str]],
     out: str | os.PathLike,
     title: str = "",
+    curves: Mapping[str, Sequence[tuple[str, Sequence[float], Sequence[float]]]] | None = None,
 ) -> None:
     """Plot ``<key>_mean`` (with ``<key>_std`` error bars) versus load, one panel each.
+
+    Where the rows carry ``<key>_lo`` and ``<key>_hi`` (an interval), the error bars span
+    that interval instead of +- ``<key>_std``.
 
     Parameters
     ----------
@@ -29,6 +44,8 @@ def plot_versus_load(
         Image file (format from its suffix), written atomically.
     title : str
         Figure title.
+    curves : mapping, optional
+        Per key, lines drawn over its data: ``(label, loads, values)`` each (fitted laws).
     """
     import matplotlib
 
@@ -42,9 +59,16 @@ def plot_versus_load(
     for ax, (key, label) in zip(axes[:, 0], quantities, strict=True):
         loads = [r["load"] for r in rows]
         means = [r.get(f"{key}_mean", math.nan) for r in rows]
-        errs = [0.0 if math.isnan(r.get(f"{key}_std", math.nan)) else r[f"{key}_std"]
-                for r in rows]
-        ax.errorbar(loads, means, yerr=errs, marker="o", capsize=3)
+        errs = [_bar(r, key, m) for r, m in zip(rows, means, strict=True)]
+        ax.errorbar(loads, means, yerr=np.array(errs).T, marker="o", capsize=3, linestyle="none"
+                    if curves and key in curves else "-")
+        for name, xs, ys in (curves or {}).get(key, ()):
+            ax.plot(xs, ys, label=name)
+        if curves and curves.get(key):
+            ax.legend(fontsize=7, loc="lower right")
+        if not any(math.isfinite(m) for m in means):
+            ax.text(0.5, 0.5, "no estimate in any load group", transform=ax.transAxes,
+                    ha="center", va="center", color="0.4")  # fmt: skip
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel(f"load / setpoint ({unit})" if unit else "load / setpoint")

@@ -372,10 +372,12 @@ def plot_velocity(report: VelocityReport, out: str | os.PathLike) -> None:
                 color="C0", label="F_peak (measured, mean over lines)")  # fmt: skip
     f = report.peak_fit
     if f is not None:
+        hi = "inf" if math.isinf(f.F_c_hi) else f"{f.F_c_hi:.3g}"
         ax.plot(grid, f.predict(grid), color="C0",
-                label=f"fit: F_c = {f.F_c_nN:.3g}+-{f.F_c_std:.2g} nN, v_c = "
+                label=f"fit: F_c = {f.F_c_nN:.3g} nN (68 %: {f.F_c_lo:.3g} to {hi}), v_c = "
                       f"{f.v_c_nm_per_s:.3g} nm/s")  # fmt: skip
-        ax.axhspan(f.F_c_nN - f.F_c_std, f.F_c_nN + f.F_c_std, color="C0", alpha=0.12)
+        if math.isfinite(f.F_c_hi):
+            ax.axhspan(f.F_c_lo, f.F_c_hi, color="C0", alpha=0.12)
     if math.isfinite(report.F_max_nN):
         ax.axhline(report.F_max_nN, color="k", ls="--", lw=1,
                    label=f"pi U0/a = {report.F_max_nN:.3g} nN (median classical U0)")
