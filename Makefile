@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q --upgrade pip
 	# the local CPU wheel first, so the project's torch range installs nothing more
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e ".[formats,test]"
+	$(BIN)/pip install -q -e ".[formats,test,dask]"
 	touch $(STAMP)
 
 install: $(STAMP)

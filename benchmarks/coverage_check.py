@@ -10,12 +10,13 @@ the training distribution to the bench:
    ranges alone (line_training.TRAIN_EFFECTS: the training prior's tail);
 2. laboratory prior: the training parameters, lattices and velocities on the bench's
    substrate (randomised.lab_config, seed 401), with the bench's LAB detector effects;
-3. benches: the lab bench (evaluation.bench) with its own seed and two others.
+3. benches: the lab bench (simulators.bench) with its own seed and two others.
 
 Seeds are apart from every training seed. Traces with 1.5 <= eta <= 40 are scored. For
 each population: 95 % and 68 % coverage of <F>, U0, K, eta with their binomial standard
 error, and U0 and K relative RMSE; for the laboratory prior, 95 % coverage per scan
 velocity as well. Writes summary.json into --work; simulated sets are cached there.
+The model is called as a ``LineEstimator`` and scored through :mod:`stickslip.jobs.evaluate`.
 
 Usage: python benchmarks/coverage_check.py [--work build/coverage-check]
        [--n-randomised 2000] [--n-lab 1200] [--n-per-material 200] [--line-model PATH]
@@ -26,27 +27,47 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from stickslip.diagnostics.calibration import coverage
-from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.modelfile import load_line_model
-from stickslip.estimators.line.training import TRAIN_EFFECTS
+from stickslip.estimators.line.training import TRAIN_EFFECTS, LineTrainConfig
+from stickslip.estimators.table import ResultTable
+from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
-from stickslip.simulators.instrument import LAB, apply_instrument
-from stickslip.simulators.randomised import cached_randomised_set, lab_config
-from stickslip.traces.dataset import Dataset, load_dataset
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
-from lab_bench import randomised_heldout  # noqa: E402
+from stickslip.simulators.instrument import (
+    LAB,
+    EffectsMixture,
+    InstrumentEffects,
+    apply_instrument,
+)
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
+from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
 RANDOMISED_SEED, LAB_SEED = 301, 401
 BENCH_SEEDS = (BENCH_SEED, BENCH_SEED + 7919, BENCH_SEED + 15838)
+
+
+def randomised_heldout(
+    work: Path, n: int, seed: int, effects: InstrumentEffects | EffectsMixture | None = None
+) -> Dataset:
+    """Held-out lines from the line model's own training distribution (cached).
+
+    A randomised set (other seed than any training set) with the training detector
+    effects (or ``effects``: ``TRAIN_EFFECTS`` for the broad ranges alone), one fixed
+    draw, the same fraction left clean (as lab_bench.py). Truth of <F>: the clean mean.
+    """
+    ds = cached_randomised_set(RandomisedConfig(n=n, seed=seed), work)
+    rng = np.random.default_rng([seed, 77])
+    clean = ds.force_nN.astype(float)
+    F, _ = apply_instrument(clean, effects or LineTrainConfig().effects, rng)
+    keep = rng.random(ds.n) < LineTrainConfig.clean_fraction
+    F[keep] = clean[keep]
+    return Dataset(F, ds.x_nm, ds.params, {**ds.attrs, "kind": "randomised-heldout"})
 
 
 def lab_prior(work: Path, n: int) -> Dataset:
@@ -62,28 +83,32 @@ def bench(work: Path, seed: int, n_per_material: int) -> Dataset:
     return load_dataset(bench_if_missing(config, work / f"bench_{n_per_material}_{seed}.h5"))
 
 
-def scored(ds: Dataset, model) -> dict:
+def metrics(table: ResultTable, truth: dict, names: list[str], mask: np.ndarray) -> dict:
+    """Evaluation metrics of the rows in ``mask`` (:func:`stickslip.jobs.evaluate.evaluate`)."""
+    return evaluate(table, {n: truth[n] for n, m in zip(names, mask, strict=True) if m}).metrics
+
+
+def scored(ds: Dataset, estimator: LineEstimator) -> dict:
     """Coverage (with binomial standard errors) and relative RMSE on one population."""
-    p = ds.params
-    lp = predict_raw_lines(model, [ds.x_nm] * ds.n, list(ds.force_nN.astype(float)),
-                           p["lattice_nm"], p["velocity_nm_per_s"])  # fmt: skip
-    ok = in_eta_window(p["eta"])
-    n = int(ok.sum())
+    traces = dataset_traces(ds)
+    table = estimator.predict(traces)
+    truth, names = truth_from_traces(table, traces), [t.name for t in traces]
+    ok = in_eta_window(ds.params["eta"])
+    m = metrics(table, truth, names, ok)
+    n = m["U0_eV"]["n"]
     out: dict = {"n": n}
-    for level, lo, hi in (("95", lp.lo95, lp.hi95), ("68", lp.lo68, lp.hi68)):
-        cov = {k: coverage(p[k][ok], lo[k][ok], hi[k][ok]) for k in KEYS}
+    for level in ("95", "68"):
+        cov = {k: m[k][f"coverage{level}"] for k in KEYS}
         out[f"coverage{level}"] = cov
         out[f"se{level}"] = {k: float(np.sqrt(c * (1 - c) / n)) for k, c in cov.items()}
     for k in ("U0_eV", "K_N_m"):
-        out[f"{k}_rel_rmse"] = float(np.sqrt(np.mean((lp.values[k] / p[k] - 1)[ok] ** 2)))
-    v = p["velocity_nm_per_s"]
+        out[f"{k}_rel_rmse"] = m[k]["rel_rmse"]
+    v = ds.params["velocity_nm_per_s"]
     out["coverage95_by_velocity"] = {}
     for u in np.unique(v):
-        m = ok & (v == u)
+        mv = metrics(table, truth, names, ok & (v == u))
         out["coverage95_by_velocity"][f"{u:g}"] = {
-            "n": int(m.sum()),
-            **{k: coverage(p[k][m], lp.lo95[k][m], lp.hi95[k][m]) for k in ("U0_eV", "K_N_m")},
-        }
+            "n": mv["U0_eV"]["n"], **{k: mv[k]["coverage95"] for k in ("U0_eV", "K_N_m")}}
     return out
 
 
@@ -96,12 +121,12 @@ def main() -> None:
     ap.add_argument("--line-model", type=Path, default=None, help="default: the bundled one")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
-    model = load_line_model(args.line_model)
+    estimator = LineEstimator(load_line_model(args.line_model), str(args.line_model or "bundled"))
     populations = {
         f"randomised held-out (seed {RANDOMISED_SEED})":
-            lambda: randomised_heldout(args.work, args.n_randomised, seed=RANDOMISED_SEED),
+            lambda: randomised_heldout(args.work, args.n_randomised, RANDOMISED_SEED),
         "the same, broad effects only":
-            lambda: randomised_heldout(args.work, args.n_randomised, seed=RANDOMISED_SEED,
+            lambda: randomised_heldout(args.work, args.n_randomised, RANDOMISED_SEED,
                                        effects=TRAIN_EFFECTS),
         f"laboratory prior (seed {LAB_SEED})": lambda: lab_prior(args.work, args.n_lab),
         **{f"bench (seed {s})": (lambda s=s: bench(args.work, s, args.n_per_material))
@@ -115,7 +140,7 @@ def main() -> None:
           f"{'cov68 ' + head:27s} U0 rel  K rel")  # fmt: skip
     summary = {}
     for name, load in populations.items():
-        r = scored(load(), model)
+        r = scored(load(), estimator)
         summary[name] = r
 
         def row(d: dict) -> str:

@@ -14,7 +14,8 @@ All estimators are scored as in lab_bench.py on its clean held-out set (300 pape
 traces, seed 4242) and on the bench (600 traces, three materials), for traces with
 1.5 <= eta <= 40. The clean-trained MLPs are included when build/lab-bench/mlp_*.pt
 exist. "<F> net" is the MLPs' own window estimate of <F> (their "<F>" column is the
-trace's mean, as in lab_bench.py). Writes summary.json into --work.
+trace's mean, as in lab_bench.py). Every estimator is called through ``predict`` and
+scored through :mod:`stickslip.jobs.evaluate`. Writes summary.json into --work.
 
 Usage: python benchmarks/encoder_vs_mlp.py [--work build/encoder-vs-mlp] [--replicas 3]
        [--epochs 50] [--seeds 102 103]   (the bundled line model's training sets)
@@ -25,30 +26,49 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from stickslip.estimators.window.inference import predict_traces
+from stickslip.conditions import Conditions
+from stickslip.estimators.base import TraceEstimator
+from stickslip.estimators.classical.baseline import five_line_estimate
+from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.line.estimator import LineEstimator
+from stickslip.estimators.line.modelfile import load_line_model
+from stickslip.estimators.table import TARGETS, ResultTable
+from stickslip.estimators.window.estimator import WindowEstimator
 from stickslip.estimators.window.modelfile import load_model, save_model
-from stickslip.estimators.window.randomised import (
-    randomised_window_set,
-    split_by_group,
-)
+from stickslip.estimators.window.randomised import randomised_window_set, split_by_group
 from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
-from stickslip.jobs.workflow import CLEAN_TEST_SEED, sweep_if_missing
-from stickslip.simulators.bench import BenchConfig, bench_if_missing, in_eta_window
+from stickslip.jobs.cache import CLEAN_TEST_SEED, sweep_if_missing
+from stickslip.jobs.evaluate import evaluate, truth_from_traces
+from stickslip.simulators.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
-from stickslip.traces.dataset import concat_datasets, load_dataset
+from stickslip.traces.dataset import concat_datasets, dataset_traces, load_dataset
 from stickslip.traces.trace import Trace
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # lab_bench.py beside this file
-from lab_bench import groups, predictions, score  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LAB = ROOT / "build" / "lab-bench"
+
+
+class FiveLineEstimator(TraceEstimator):
+    """The five-line baseline (:func:`five_line_estimate`) behind the estimator interface
+    (as in lab_bench.py)."""
+
+    name = "five-line"
+    kind = "baseline"
+
+    def estimate(self, traces: Sequence[Trace], conditions: Sequence[Conditions]
+                 ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
+        out: list[dict[str, Any] | str] = []
+        for t, c in zip(traces, conditions, strict=True):
+            est = five_line_estimate(t.x_nm, t.force_nN, c.lattice_nm)
+            out.append({k: float(est[k][0]) for k in TARGETS})
+        return out, []
 
 
 def dr_window_model(train, work: Path, recipe: str, epochs: int, replicas: int):
@@ -66,15 +86,18 @@ def dr_window_model(train, work: Path, recipe: str, epochs: int, replicas: int):
     return model
 
 
-def net_friction(ds, mlps) -> dict[str, np.ndarray]:
-    """The MLPs' own window estimate of <F> (``F_mean_net``) on a data set."""
-    F, a = ds.force_nN.astype(float), ds.params["lattice_nm"]
-    traces = [Trace(ds.x_nm, f, f"t{i}", meta={"lattice_nm": float(ai)})
-              for i, (f, ai) in enumerate(zip(F, a, strict=True))]  # fmt: skip
-    out = {}
-    for name, model in mlps.items():
-        est, _ = predict_traces(model, traces)
-        out[name] = np.array([e.values["F_mean_net"] for e in est])
+def network_friction(table: ResultTable) -> ResultTable:
+    """The table with a window model's own <F> (``F_mean_net``) as ``F_mean_nN``."""
+    rows = [{**r, "F_mean_nN": r.get("F_mean_net")} for r in table.rows]
+    return ResultTable(rows=rows, estimator=table.estimator, intervals=table.intervals)
+
+
+def groups(set_name: str, ds, ok: np.ndarray) -> dict[str, np.ndarray]:
+    """Masks scored for a data set: the whole set, and each material on the bench."""
+    out = {set_name: ok}
+    if set_name == "bench":
+        for m, mat in enumerate(MATERIALS):
+            out[f"bench {mat}"] = ok & (ds.params["material"] == m)
     return out
 
 
@@ -91,8 +114,6 @@ def main() -> None:
     machine = (f"{platform.processor() or platform.machine()}, {platform.system()}, "
                f"python {platform.python_version()}")  # fmt: skip
     print(f"machine: {machine}")
-
-    from stickslip.estimators.line.modelfile import load_line_model
 
     source = concat_datasets([
         cached_randomised_set(RandomisedConfig(n=args.n, seed=s), ROOT / "build" / "line-train")
@@ -121,7 +142,9 @@ def main() -> None:
               f"{tc.get('best_epoch')}/{args.epochs}, trained in {tc.get('train_seconds', 0):.0f} s"
               f" ({time.perf_counter() - t0:.0f} s here incl. loading)")  # fmt: skip
         mlps[f"MLP {r} (DR)"] = model
-    line_model = load_line_model()
+    estimators = {"five-line": FiveLineEstimator(), "classical": ClassicalEstimator(),
+                  **{name: WindowEstimator(m, name) for name, m in mlps.items()},
+                  "line CNN": LineEstimator(load_line_model(None), "bundled")}  # fmt: skip
 
     bench_path = bench_if_missing(BenchConfig(n_per_material=200), LAB / "bench_200.h5")
     sets = {"clean": load_dataset(sweep_if_missing(LAB / "clean.h5", 300, CLEAN_TEST_SEED)),
@@ -129,27 +152,30 @@ def main() -> None:
     summary: dict = {"machine": machine, "args": {k: str(v) for k, v in vars(args).items()},
                      "training": training, "scores": {}}  # fmt: skip
     for set_name, ds in sets.items():
-        truth = {k: ds.params[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")}
-        ok = in_eta_window(truth["eta"])
-        preds = predictions(ds, line_model, mlps)
-        f_net = net_friction(ds, mlps)
+        traces = dataset_traces(ds, name=set_name)
+        tables = {name: est.predict(traces) for name, est in estimators.items()}
+        truth = truth_from_traces(tables["line CNN"], traces)
+        names = [t.name for t in traces]
+        ok = in_eta_window(ds.params["eta"])
         for g, mask in groups(set_name, ds, ok).items():
+            truth_g = {n: truth[n] for n, m in zip(names, mask, strict=True) if m}
             print(f"\n{g}: {int(mask.sum())} traces with 1.5 <= eta <= 40")
             print(f"{'estimator':<18}{'<F> RMSE nN':>13}{'U0 rel RMSE':>13}{'K rel RMSE':>12}"
                   f"{'U0 RMSE eV':>12}{'K RMSE N/m':>12}{'<F> net nN':>12}")  # fmt: skip
-            for est, pred in preds.items():
-                s = score(truth, pred, mask)
+            for est, table in tables.items():
+                m = evaluate(table, truth_g).metrics
+                s = {"metrics": m}
                 net = ""
-                if est in f_net:
-                    d = (f_net[est] - truth["F_mean_nN"])[mask]
-                    s["F_net_rmse"] = float(np.sqrt(np.nanmean(d**2)))
-                    net = f"{s['F_net_rmse']:>12.4f}"
+                if est in mlps:
+                    f_net = evaluate(network_friction(table), truth_g).metrics["F_mean_nN"]
+                    s["F_net_rmse"] = f_net["rmse"]
+                    net = f"{f_net['rmse']:>12.4f}"
                 summary["scores"].setdefault(g, {})[est] = s
-                print(f"{est:<18}{s['F_rmse']:>13.4f}{s['U0_eV_rel_rmse']:>13.2%}"
-                      f"{s['K_N_m_rel_rmse']:>12.2%}{s['U0_eV_rmse']:>12.3f}"
-                      f"{s['K_N_m_rmse']:>12.2f}{net}")  # fmt: skip
+                u, k = m["U0_eV"], m["K_N_m"]
+                print(f"{est:<18}{m['F_mean_nN']['rmse']:>13.4f}{u['rel_rmse']:>13.2%}"
+                      f"{k['rel_rmse']:>12.2%}{u['rmse']:>12.3f}{k['rmse']:>12.2f}{net}")
     summary["wall_seconds"] = time.perf_counter() - t_start
-    (args.work / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (args.work / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     print(f"\nwrote {args.work / 'summary.json'} ({summary['wall_seconds']:.0f} s in all)")
 
 

@@ -1,24 +1,61 @@
-"""Inference throughput of the bundled models: traces per second, 512-pixel traces, batched.
+"""Inference throughput of an estimator: traces per second, 512-pixel traces.
 
-Window model: :func:`stickslip.estimators.window.inference.predict_array` (features + one
-batched forward pass + per-trace means). Line model (``--line``): the bundled CNN
-ensemble with uncertainty, :func:`stickslip.estimators.line.ensemble.predict_raw_lines` (mapping,
-all members, predictive mean, std and intervals), at the reference lattice and at
-a = 0.316 nm. Run it on a quiet machine.
+Times ``estimator.predict(traces)`` (:mod:`stickslip.estimators.base`: conditions,
+mapping, the model, one result row per trace), the call ``infer`` and the Python API
+make, and for learned models the numerical kernel alone on an (N, 512) array
+(window: :func:`stickslip.estimators.window.inference.predict_array`, features + one
+batched forward pass + per-trace means; line: :func:`stickslip.estimators.line.ensemble.
+predict_raw_lines`, mapping, all members, mean, std and intervals), for any estimator
+``load_estimator`` gives: ``window`` (the default: the bundled
+paper MLP, windows through one batched forward pass), ``default`` (the bundled line
+model: the CNN ensemble with calibrated intervals; ``--line`` is a shorthand), ``classical``
+or a model file. Learned models are timed at the reference lattice and, where they map
+it, at a = 0.316 nm. Run it on a quiet machine.
 
-Usage: python benchmarks/inference_speed.py [--n 20000] [--repeats 5] [--threads 2] [--line]
+Usage: python benchmarks/inference_speed.py [--n 20000] [--repeats 5] [--threads 2]
+       [--model window | --line]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import platform
 import time
 
 import numpy as np
 import torch
 
+from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.load import load_estimator
 from stickslip.estimators.window.inference import predict_array
-from stickslip.estimators.window.modelfile import load_model
+from stickslip.traces.trace import Trace
+
+
+def best_of(repeats: int, call) -> float:
+    """The shortest wall time of ``repeats`` calls (after one warm-up call)."""
+    call()
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        call()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def kernel(estimator, force: np.ndarray, x: np.ndarray, a: float):
+    """The numerical kernel of a learned estimator on an (N, P) array, or None."""
+    n = force.shape[0]
+    if estimator.kind == "window":
+        f32 = force.astype(np.float32)
+        if a != estimator.reference.lattice_nm:
+            return None  # predict_array reads traces already on the training lattice
+        return lambda: predict_array(estimator.model, f32)
+    if estimator.kind == "line":
+        xs, fs = [x] * n, list(force)
+        return lambda: predict_raw_lines(estimator.ensemble, xs, fs, np.full(n, a),
+                                         np.full(n, 60.0))  # fmt: skip
+    return None
 
 
 def main() -> None:
@@ -26,48 +63,40 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--model", default=None)
-    parser.add_argument("--line", action="store_true", help="Time the line model instead.")
+    parser.add_argument("--model", default="window",
+                        help="window (bundled paper MLP), default (bundled line model), "
+                        "classical, or a model file")  # fmt: skip
+    parser.add_argument("--line", action="store_true", help="Time the bundled line model.")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    load = f", load average {os.getloadavg()[0]:.1f}" if hasattr(os, "getloadavg") else ""
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
+          f"{os.cpu_count()} cores{load}, python {platform.python_version()}, "
+          f"torch {torch.__version__}")  # fmt: skip
+    estimator = load_estimator(None if args.line else args.model)
+    print(f"estimator: {estimator.describe()}")
     rng = np.random.default_rng(0)
     x = np.arange(512) * (11.0 / 512)
     # saw-tooth-like stand-ins; throughput does not depend on the content
     force = (2.0 * ((x[None, :] / 0.246 + rng.random((args.n, 1))) % 1.0) +
-             0.02 * rng.standard_normal((args.n, 512))).astype(np.float32)  # fmt: skip
-    if args.line:
-        line_speed(args, x, force)
-        return
-    model = load_model(args.model)
-    predict_array(model, force[:1000])
-    best = np.inf
-    for _ in range(args.repeats):
-        t = time.perf_counter()
-        predict_array(model, force)
-        best = min(best, time.perf_counter() - t)
-    spec = model.features
-    print(f"{args.n} traces of 512 px, recipe {spec.recipe}, window {spec.window}, "
-          f"stride {spec.stride}, {args.threads} threads: best of {args.repeats} "
-          f"{best:.3f} s = {args.n / best:,.0f} traces/s")
-
-
-def line_speed(args, x: np.ndarray, force: np.ndarray) -> None:
-    from stickslip.estimators.line.ensemble import predict_raw_lines
-    from stickslip.estimators.line.modelfile import load_line_model
-
-    ens = load_line_model(args.model)
-    n = force.shape[0]
-    xs, fs = [x] * n, list(force.astype(float))
-    for a in (ens.spec.lattice_nm, 0.316):
-        predict_raw_lines(ens, xs[:500], fs[:500], np.full(500, a), np.full(500, 60.0))
-        best = np.inf
-        for _ in range(args.repeats):
-            t = time.perf_counter()
-            predict_raw_lines(ens, xs, fs, np.full(n, a), np.full(n, 60.0))
-            best = min(best, time.perf_counter() - t)
-        print(f"line model ({len(ens.members)} members), {n} traces of 512 px at a = {a:g} nm, "
-              f"{args.threads} threads: best of {args.repeats} {best:.3f} s = "
-              f"{n / best:,.0f} traces/s")
+             0.02 * rng.standard_normal((args.n, 512)))  # fmt: skip
+    traces = [Trace(x, f, f"t{i}") for i, f in enumerate(force)]
+    lattices = [estimator.reference.lattice_nm]
+    if estimator.kind != "classical":
+        lattices.append(0.316)
+    for a in lattices:
+        first = traces[:200]
+        answered = len(estimator.predict(first, lattice_nm=a).ok())
+        runs = {"predict()": lambda a=a: estimator.predict(traces, lattice_nm=a),
+                "kernel": kernel(estimator, force, x, a)}  # fmt: skip
+        for what, call in runs.items():
+            if call is None:
+                continue
+            best = best_of(args.repeats, call)
+            print(f"{estimator.name} {what:<10}: {args.n} traces of 512 px at a = {a:g} nm, "
+                  f"{args.threads} threads: best of {args.repeats} {best:.3f} s = "
+                  f"{args.n / best:,.0f} traces/s")  # fmt: skip
+        print(f"  ({answered} of the first {len(first)} traces answered)")
 
 
 if __name__ == "__main__":

@@ -20,6 +20,12 @@
    reads the bundled window model, --expert none trains without.
 3. Saves it to src/stickslip/resources/line_model.pt (or --out).
 
+A thin wrapper over :mod:`stickslip.jobs.train` (``bundled_line_data``, ``expert_model``,
+``train_line``): with its defaults it trains what
+``stickslip train --kind line --recipe bundled --expert clean --seed 102 --out M.pt``
+trains; the flags here also vary the recipe's data and the training settings the
+command line leaves at their defaults.
+
 --recalibrate MODEL skips step 2's training: it re-fits only the spread calibration of
 MODEL (trained by this script with the same arguments, the calibration's own settings
 --calibration-draws and --spread-power aside) on the same validation trajectories.
@@ -37,58 +43,40 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from stickslip.estimators.line.modelfile import line_metadata, load_line_model, save_line_model
 from stickslip.estimators.line.training import (
     CALIBRATION_FIELDS,
     TYPICAL_FRACTION,
     LineTrainConfig,
     recalibrate_line_ensemble,
-    train_line_ensemble,
     training_effects,
 )
-from stickslip.estimators.window.modelfile import TrainedModel, load_model
-from stickslip.jobs.workflow import (
-    PAPER_TRAIN_SEED,
-    RESERVED_SEEDS,
-    clean_window_model,
-    sweep_if_missing,
+from stickslip.jobs.train import (
+    BundledRecipe,
+    TrainingDataError,
+    bundled_line_data,
+    expert_model,
+    train_line,
 )
-from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
-from stickslip.traces.dataset import Dataset, concat_datasets, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPERT_SEED, EXPERT_N = PAPER_TRAIN_SEED, 1600  # the bundled window model's training data
-
-
-def clean_expert(work: Path) -> TrainedModel:
-    """The paper's pi MLP trained on clean paper-preset simulations (cached in ``work``)."""
-    return clean_window_model(work / "expert_pi_clean.pt", work / "paper_train.h5", EXPERT_N,
-                              EXPERT_SEED)  # fmt: skip
-
-
-def paper_lines(work: Path, n: int, seed: int) -> Dataset:
-    """Clean paper-preset trajectories (cached), with the randomised sets' defect count."""
-    ds = load_dataset(sweep_if_missing(work / f"paper_{n}_{seed}.h5", n, seed))
-    ds.params["defect_count"] = np.count_nonzero(ds.params["defect_height_U0"], axis=1)
-    return ds
+RECIPE = BundledRecipe()
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=4000)
-    ap.add_argument("--seeds", type=int, nargs="+", default=[102, 103])
-    ap.add_argument("--paper", type=int, default=3200,
+    ap.add_argument("--n", type=int, default=RECIPE.n)
+    ap.add_argument("--seeds", type=int, nargs="+", default=list(RECIPE.seeds))
+    ap.add_argument("--paper", type=int, default=RECIPE.paper,
                     help="clean paper-preset trajectories added to the training data")
-    ap.add_argument("--paper-seed", type=int, default=5)
-    ap.add_argument("--typical", type=int, default=3000,
+    ap.add_argument("--paper-seed", type=int, default=RECIPE.paper_seed)
+    ap.add_argument("--typical", type=int, default=RECIPE.typical,
                     help="trajectories on a typical measurement's substrate (lab_config) added")
-    ap.add_argument("--typical-seed", type=int, default=104)
+    ap.add_argument("--typical-seed", type=int, default=RECIPE.typical_seed)
     ap.add_argument("--typical-fraction", type=float, default=TYPICAL_FRACTION,
                     help="fraction of lines given a typical instrument's detector effects")
-    ap.add_argument("--members", type=int, default=3)
-    ap.add_argument("--epochs", type=int, default=45)
+    ap.add_argument("--members", type=int, default=LineTrainConfig.members)
+    ap.add_argument("--epochs", type=int, default=LineTrainConfig.epochs)
     ap.add_argument("--beta", type=float, default=LineTrainConfig.beta,
                     help="beta-NLL weight of the means' gradient")
     ap.add_argument("--beta-var", type=float, default=LineTrainConfig.beta_var,
@@ -108,53 +96,48 @@ def main() -> None:
     ap.add_argument("--out", type=Path,
                     default=ROOT / "src" / "stickslip" / "resources" / "line_model.pt")
     args = ap.parse_args()
-    sets = [cached_randomised_set(RandomisedConfig(n=args.n, seed=s), args.work)
-            for s in args.seeds]  # fmt: skip
-    if args.typical:
-        sets.append(cached_randomised_set(lab_config(args.typical, args.typical_seed), args.work))
-    columns = sorted(sets[0].params)
-    if args.paper:
-        if args.paper_seed in RESERVED_SEEDS:
-            ap.error("--paper-seed must differ from the expert's and the benchmarks' seeds")
-        sets.append(paper_lines(args.work, args.paper, args.paper_seed))
-    described = [{"config": d.config_json, "fingerprint": d.fingerprint()} for d in sets]
-    data = concat_datasets(sets, columns)
+    recipe = BundledRecipe(n=args.n, seeds=tuple(args.seeds), typical=args.typical,
+                           typical_seed=args.typical_seed, paper=args.paper,
+                           paper_seed=args.paper_seed)  # fmt: skip
+    try:
+        training = bundled_line_data(args.work, recipe)
+    except TrainingDataError as e:
+        ap.error(str(e))
+    # the seed of the first randomised set seeds the split and the optimiser (the
+    # command line's --seed 102)
     cfg = LineTrainConfig(members=args.members, epochs=args.epochs, seed=args.seeds[0],
                           beta=args.beta, beta_var=args.beta_var,
                           spread_hidden=args.spread_hidden,
                           effects=training_effects(args.typical_fraction),
                           calibration_draws=args.calibration_draws,
-                          spread_power=args.spread_power)
+                          spread_power=args.spread_power)  # fmt: skip
     if args.recalibrate is not None:
-        meta = line_metadata(args.recalibrate)
-        # the validation split is only held out if the data and the training settings are
-        # the ones the model was trained with (the calibration settings may differ)
-        trained = {k: v for k, v in meta["train_config"].items() if k not in CALIBRATION_FIELDS}
-        asked = {k: v for k, v in cfg.to_dict().items() if k not in CALIBRATION_FIELDS}
-        if meta["dataset"].get("sets") != described or json.dumps(
-            trained, sort_keys=True) != json.dumps(asked, sort_keys=True):  # fmt: skip
-            ap.error(f"{args.recalibrate} was not trained with these data and settings")
-        ens = load_line_model(args.recalibrate)
-        report = recalibrate_line_ensemble(ens, data.force_nN.astype(float), data.x_nm,
-                                           data.params, cfg)  # fmt: skip
-        metrics = {**meta["metrics"], **report, "recalibrated_from": str(args.recalibrate)}
-        save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), meta["dataset"], metrics)
-        print(json.dumps(report, indent=1))
-        print(f"wrote {args.out}")
+        recalibrate(ap, args, training.data, training.parts, cfg)
         return
-    expert = {"none": lambda: None, "bundled": lambda: load_model(None),
-              "clean": lambda: clean_expert(args.work)}.get(
-        args.expert, lambda: load_model(Path(args.expert)))()  # fmt: skip
-    data_card = {"sets": described}
-    if expert is not None:
-        data_card["expert"] = {"model": args.expert,
-                               "dataset_fingerprint": expert.dataset_fingerprint}
-    ens, report = train_line_ensemble(data.force_nN.astype(float), data.x_nm, data.params, cfg,
-                                      expert=expert)  # fmt: skip
-    report.pop("history")
-    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), data_card, report)
+    report = train_line(training, args.out, cfg, expert_model(args.expert, args.work, recipe),
+                        args.expert)  # fmt: skip
     print(json.dumps(report, indent=1))
     print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.2f} MB)")
+
+
+def recalibrate(ap: argparse.ArgumentParser, args: argparse.Namespace, data, parts: list,
+                cfg: LineTrainConfig) -> None:  # fmt: skip
+    """Re-fit only the spread calibration of ``args.recalibrate`` and save it to ``args.out``."""
+    meta = line_metadata(args.recalibrate)
+    # the validation split is only held out if the data and the training settings are
+    # the ones the model was trained with (the calibration settings may differ)
+    trained = {k: v for k, v in meta["train_config"].items() if k not in CALIBRATION_FIELDS}
+    asked = {k: v for k, v in cfg.to_dict().items() if k not in CALIBRATION_FIELDS}
+    if meta["dataset"].get("sets") != parts or json.dumps(
+        trained, sort_keys=True) != json.dumps(asked, sort_keys=True):  # fmt: skip
+        ap.error(f"{args.recalibrate} was not trained with these data and settings")
+    ens = load_line_model(args.recalibrate)
+    report = recalibrate_line_ensemble(ens, data.force_nN.astype(float), data.x_nm, data.params,
+                                       cfg)  # fmt: skip
+    metrics = {**meta["metrics"], **report, "recalibrated_from": str(args.recalibrate)}
+    save_line_model(ens, args.out, cfg.channels, cfg.to_dict(), meta["dataset"], metrics)
+    print(json.dumps(report, indent=1))
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

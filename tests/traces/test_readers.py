@@ -176,9 +176,12 @@ def test_map_to_traces_directions_loop_and_names():
     np.testing.assert_allclose(traces[0].x_nm[1], 11.0 / N)
 
 
-def test_stored_calibration_wins_and_newton_channels_convert():
+def test_user_calibration_wins_over_the_stored_one_and_newton_channels_convert():
     traces = map_to_traces(_scan(meta={"calibration_nN_per_V": 3.0}), calibration_nN_per_V=7.0)
-    assert traces[0].force_nN[0] == pytest.approx(3.0 * _scan().channels[1].data[0, 0])
+    assert traces[0].force_nN[0] == pytest.approx(7.0 * _scan().channels[1].data[0, 0])
+    assert traces[0].meta["calibration_source"] == "flag"
+    stored = map_to_traces(_scan(meta={"calibration_nN_per_V": 3.0}))
+    assert stored[0].force_nN[0] == pytest.approx(3.0 * _scan().channels[1].data[0, 0])
     n = map_to_traces(_scan(unit="N"))
     assert n[0].meta["unit"] == "nN" and n[0].force_nN[0] == pytest.approx(
         1e9 * _scan().channels[1].data[0, 0])

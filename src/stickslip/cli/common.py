@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
+from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
 import typer
@@ -37,6 +39,30 @@ def show_progress() -> bool:
     return VERBOSITY["level"] >= 1 and sys.stderr.isatty()
 
 
+@contextlib.contextmanager
+def progress_bar(total: int, desc: str, unit: str = "trace"
+                 ) -> Iterator[Callable[[int], None] | None]:  # fmt: skip
+    """A progress bar on stderr, fed by a callback that takes the count done so far.
+
+    Yields None (no bar) unless :func:`show_progress` (a terminal, not ``-q``); pass the
+    callback to the library's ``progress=`` arguments.
+    """
+    if not show_progress() or total <= 0:
+        yield None
+        return
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True)
+
+    def update(done: int) -> None:
+        bar.update(max(0, done - bar.n))
+
+    try:
+        yield update
+    finally:
+        bar.close()
+
+
 def usage_error(message: str) -> NoReturn:
     """Print one line and exit with the usage-error code."""
     error(message)
@@ -60,7 +86,8 @@ def is_interactive() -> bool:
 
 
 # Reading options shared by every command that reads vendor maps.
-CALIBRATION_HELP = "Lateral calibration in nN/V, for force channels in volts (file value wins)."
+CALIBRATION_HELP = ("Lateral calibration in nN/V, for force channels in volts (wins over a "
+                    "calibration stored in the file).")
 LPL_HELP = "Consecutive scan lines recorded at one load (groups lines by load)."
 LOADS_HELP = "Comma-separated loads/setpoints of the line groups (with --lines-per-load)."
 

@@ -22,6 +22,7 @@ from stickslip.cli.common import (
     error,
     info,
     parse_loads_arg,
+    progress_bar,
     reading_options,
     show_progress,
     usage_error,
@@ -30,7 +31,7 @@ from stickslip.conditions import GRAPHITE, check_values
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.line.training import LineTrainConfig
 from stickslip.estimators.load import load_estimator
-from stickslip.estimators.table import TableFormatError, table_format
+from stickslip.estimators.table import TableFormatError, has_estimate, table_format
 from stickslip.estimators.window.features import FeatureError
 from stickslip.estimators.window.modelfile import ModelFileError
 from stickslip.estimators.window.training import TrainConfig
@@ -90,10 +91,13 @@ def run_estimation(
     if examples:
         found, errors = load_examples()[0], []
     else:
-        found, errors = inf.read_inputs(traces, opts)
+        with progress_bar(inf.count_inputs(traces), "read", "file") as bar:
+            found, errors = inf.read_inputs(traces, opts, progress=bar)
     info(f"estimator: {estimator.describe()}; {len(found)} trace(s) read")
-    result = inf.infer(estimator, found, errors, lattice_nm=lattice, velocity_nm_per_s=velocity,
-                       temperature_K=temperature, classical=classical, check=check)  # fmt: skip
+    with progress_bar(len(found) if check else 0, "check") as bar:
+        result = inf.infer(estimator, found, errors, lattice_nm=lattice,
+                           velocity_nm_per_s=velocity, temperature_K=temperature,
+                           classical=classical, check=check, progress=bar)  # fmt: skip
     for line in result.error_lines():
         error(line)
     for note in result.table.notes:
@@ -109,14 +113,15 @@ def run_estimation(
     if ok:
         echo(inf.summary_text(result.table, truth))
     if plots is not None:
-        panels = inf.write_panels(result, estimator, plots)
+        with progress_bar(inf.count_panels(result), "panels") as bar:
+            panels = inf.write_panels(result, estimator, plots, progress=bar)
         info(f"wrote {len(panels)} panels in {plots}")
     if report is not None:
         written.append(inf.write_run_report(result, estimator, report, traces, sys.argv))
     n_flag = len(result.table.rows) - len(ok) - len(result.refused)
     info(f"{len(ok)} ok, {n_flag} flagged, {len(result.refused)} without an estimate -> "
          + ", ".join(str(p) for p in written))
-    if not ok and not any("U0_eV" in r for r in result.table.rows):
+    if not ok and not any(has_estimate(r) for r in result.table.rows):
         return EXIT_FAILED_INPUT
     return EXIT_FAILED_INPUT if result.refused else EXIT_OK
 
@@ -216,7 +221,9 @@ def evaluate_cmd(
         usage_error(f"{out}: exists and is not a folder")
     _check_conditions(lattice, velocity, temperature)
     est = _estimator(model)
-    found, errors = inf.read_inputs(inputs, reading_options(calibration, None, None))
+    with progress_bar(inf.count_inputs(inputs), "read", "file") as bar:
+        found, errors = inf.read_inputs(inputs, reading_options(calibration, None, None),
+                                        progress=bar)  # fmt: skip
     result = inf.infer(est, found, errors, lattice_nm=lattice, velocity_nm_per_s=velocity,
                        temperature_K=temperature, classical=False)  # fmt: skip
     for line in result.error_lines():

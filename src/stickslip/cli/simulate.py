@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
 import typer
 
+from stickslip.cli.app import app
 from stickslip.cli.common import error, info, usage_error
-from stickslip.cli.main import app
-from stickslip.traces.dataset import DatasetError
+from stickslip.traces.dataset import DatasetError, check_output_path
 from stickslip.traces.trace import write_trace_csv
 
 
@@ -28,7 +30,7 @@ def _range(text: str | None, name: str) -> tuple[float, float] | None:
 @app.command("simulate")
 def simulate_cmd(
     out: Path = typer.Option(
-        ..., "--out", "-o", help="Output: .csv for one trace, .h5 for a sweep."
+        ..., "--out", "-o", help="Output: .csv for one trace, .h5 or .zarr for a sweep."
     ),
     u0: float | None = typer.Option(None, "--u0", help="Barrier U0 in eV (single trace)."),
     k: float | None = typer.Option(None, "--k", help="Contact stiffness K in N/m (single trace)."),
@@ -57,14 +59,34 @@ def simulate_cmd(
         0, "--fine", help="Single trace: also write instantaneous tip/force, N per pixel."
     ),
     resume: bool = typer.Option(False, "--resume", help="Sweep: continue an interrupted run."),
-    chunk: int = typer.Option(256, "--chunk", help="Sweep: trajectories per write."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Sweep: discard an interrupted run's <out>.partial, start again."
+    ),
+    chunk: int = typer.Option(
+        0, "--chunk", help="Sweep: trajectories per kernel call and write (0: 32 per thread)."
+    ),
+    dask: str | None = typer.Option(
+        None, "--dask", help="Sweep: run the shards on Dask: 'local' or a scheduler address "
+        "(tcp://host:8786)."
+    ),  # fmt: skip
+    shards: int | None = typer.Option(
+        None, "--shards", help="Sweep: number of shards (Dask tasks, Zarr chunks; default: 64 "
+        "trajectories each)."
+    ),  # fmt: skip
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar."),
+    backend: str = typer.Option(
+        "cpu",
+        "--backend",
+        help="Simulator: cpu (default; same traces on every machine), cuda (NVIDIA GPU, "
+        "pip install 'stickslip[gpu]'), cuda-float32, or auto (cuda if a GPU is present).",
+    ),
 ) -> None:
     """Simulate finite-temperature Prandtl-Tomlinson friction traces (BAOAB integrator).
 
     With --u0 and --k: one trace, written as CSV 'x_nm,force_nN'. Otherwise: a sweep of
     --n trajectories over the training range (Latin hypercube in U0 and K, eta window
-    enforced), written as chunked HDF5.
+    enforced), written as chunked HDF5 or, for --out *.zarr, a Zarr store. Ctrl-C keeps
+    the finished trajectories in <out>.partial and prints the command that continues it.
     """
     from stickslip.simulators import (
         PRESETS,
@@ -75,9 +97,15 @@ def simulate_cmd(
         run_sweep,
         simulate,
     )
+    from stickslip.simulators.shards import ClusterError
+    from stickslip.simulators.sweep import PartialExistsError, SweepInterrupted
 
     if preset not in PRESETS:
         usage_error(f"unknown preset '{preset}' (have: {', '.join(PRESETS)})")
+    from stickslip.simulators.backends import BACKEND_NAMES
+
+    if backend not in BACKEND_NAMES:
+        usage_error(f"unknown --backend '{backend}' (have: {', '.join(BACKEND_NAMES)})")
     try:
         physics = PRESETS[preset].replace(
             temperature_K=temperature, velocity_nm_per_s=velocity, mass_kg=mass,
@@ -86,12 +114,14 @@ def simulate_cmd(
         )  # fmt: skip
         if (u0 is None) != (k is None):
             usage_error("give both --u0 and --k for a single trace, or neither for a sweep")
+        check_output_path(out)  # now, not after the run
         if u0 is not None:
             if k <= 0:
                 raise SettingsError(f"K must be > 0 N/m (got {k})")
             if u0 < 0:
                 raise SettingsError(f"U0 must be >= 0 eV (got {u0})")
-            res = simulate([u0], [k], physics, seed=seed, samples_per_pixel=max(fine, 0))
+            res = simulate([u0], [k], physics, seed=seed, samples_per_pixel=max(fine, 0),
+                           backend=backend)  # fmt: skip
             write_trace_csv(out, res.x_nm, res.force_nN[0])
             if fine > 0:
                 _write_fine(out, res)
@@ -110,15 +140,36 @@ def simulate_cmd(
             modulation_amplitude=(0.0, modulation), defects_per_line=(0, max(defects, 0))
         )
         config = SweepConfig(
-            physics=physics, ranges=ranges, augmentation=aug, n=n, seed=seed, preset=preset
-        )
-        path = run_sweep(config, out, resume=resume, chunk=max(chunk, 1), progress=progress)
+            physics=physics, ranges=ranges, augmentation=aug, n=n, seed=seed, preset=preset,
+            backend=backend,
+        )  # fmt: skip
+        if resume and overwrite:
+            usage_error("give --resume or --overwrite, not both")
+        if shards is not None and shards < 1:
+            usage_error(f"--shards must be >= 1 (got {shards})")
+        path = run_sweep(
+            config, out, resume=resume, overwrite=overwrite, chunk=max(chunk, 0) or None,
+            progress=progress, dask=dask, shards=shards,
+        )  # fmt: skip
         info(f"wrote {path} ({n} trajectories, {physics.pixels} pixels)")
     except SettingsError as e:
         usage_error(str(e))
-    except DatasetError as e:
+    except PartialExistsError as e:
+        usage_error(f"{e.partial}: an interrupted run is kept there; continue it with --resume "
+                    "or start again with --overwrite")  # fmt: skip
+    except SweepInterrupted as e:
+        error(f"interrupted: {e.done} of {e.total} trajectories kept in {e.partial}; "
+              f"continue with: {_resume_command()}")  # fmt: skip
+        raise typer.Exit(130) from None
+    except (DatasetError, ClusterError) as e:
         error(str(e))
         raise typer.Exit(1) from None
+
+
+def _resume_command() -> str:
+    """This command line with --resume (and without --overwrite): it continues the run."""
+    args = [a for a in sys.argv[1:] if a != "--overwrite"]
+    return shlex.join(["stickslip", *args, *([] if "--resume" in args else ["--resume"])])
 
 
 def _write_fine(out: Path, res) -> None:

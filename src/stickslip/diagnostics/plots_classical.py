@@ -22,12 +22,14 @@ def plot_trace_diagnostics(
     force_nN: np.ndarray,
     analysis: SlipAnalysis,
     row: Mapping[str, Any],
+    unit: str = "nN",
 ) -> None:
     """Trace with detected stick segments, their fitted branches and the slip points.
 
     ``row`` is the trace's row of the classical estimator's table. On a flagged row
     (``quality`` not ``ok``) the fitted branches are not drawn: they do not describe
-    the data; the title says why.
+    the data; the title says why. ``unit`` is the force unit: ``"V"`` for a trace read
+    without a calibration, whose row has ``U0_V_nm``, ``K_V_per_nm`` ... (never nN).
     """
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(x_nm, force_nN, ".", ms=2, color="0.6", label="trace")
@@ -39,12 +41,16 @@ def plot_trace_diagnostics(
     ax.plot(s[:, SLIP_X], s[:, SLIP_F], "v", ms=4, color="C3", label="slips")
     ax.plot(s[:, SLIP_X], s[:, SLIP_PEAK], "_", ms=8, color="C1", label="peaks")
     ax.set_xlabel("support position X (nm)")
-    ax.set_ylabel("lateral force F (nN)")
+    ax.set_ylabel(f"lateral force F ({unit})")
     def g(k: str) -> float:
         v = row.get(k)
         return float(v) if isinstance(v, (int, float, np.number)) else float("nan")
 
-    if ok:
+    if ok and unit == "V":
+        title = (f"{row['trace']}: U0 = {g('U0_V_nm'):.3g} V nm, K = {g('K_V_per_nm'):.3g} "
+                 f"V/nm, eta = {g('eta'):.3g}, k_exp = {g('k_exp_V_per_nm'):.3g} V/nm, "
+                 f"{int(g('n_slips'))} slips, {row.get('regime') or '-'} (no calibration)")
+    elif ok:
         title = (f"{row['trace']}: U0 = {g('U0_eV'):.3g} eV, K = {g('K_N_m'):.3g} N/m, "
                  f"eta = {g('eta'):.3g}, k_exp = {g('k_exp_N_m'):.3g} N/m, "
                  f"{int(g('n_slips'))} slips, {row.get('regime') or '-'}")  # fmt: skip

@@ -6,7 +6,9 @@ Columns, in this order where present:
   full name for map lines), ``estimator``, ``quality`` (``ok`` or the reason there is
   no estimate: a refusal, or an unreadable input);
 - the estimates ``F_mean_nN, U0_eV, K_N_m, eta``, then ``*_std``, and where the
-  estimator gives intervals ``*_lo68, *_hi68, *_lo95, *_hi95``;
+  estimator gives intervals ``*_lo68, *_hi68, *_lo95, *_hi95``; a trace in volts (read
+  without a calibration) has ``F_mean_V, U0_V_nm, K_V_per_nm`` instead (:data:`VOLT_NAMES`:
+  volts are never shown as nN);
 - the conditions used and the source of each (:mod:`stickslip.conditions`);
 - provenance: ``file, channel, direction, line, load, load_unit``;
 - then the estimator's own columns (``regime``, ``k_exp_N_m``, ``n_windows``, ``gof``,
@@ -34,20 +36,29 @@ import numpy as np
 
 from stickslip.atomic import atomic_path, write_text_atomic
 from stickslip.conditions import QUANTITIES
+from stickslip.units import EV_TO_NN_NM
 
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
 BOUNDS = ("lo68", "hi68", "lo95", "hi95")
 HEAD = ("trace", "estimator", "quality")
+#: Names of the estimates of a trace in volts (read without a calibration): <F> in V,
+#: U0 = F_max a / pi in V nm, K and the stick slopes in V/nm, the peak force and the
+#: noise in V; eta does not depend on the calibration and keeps its name.
+VOLT_NAMES = {"F_mean_nN": "F_mean_V", "U0_eV": "U0_V_nm", "K_N_m": "K_V_per_nm",
+              "k_exp_N_m": "k_exp_V_per_nm", "F_peak_nN": "F_peak_V", "noise_nN": "noise_V"}
+VOLT_TARGETS = tuple(VOLT_NAMES[k] for k in TARGETS[:3])
 STD_COLUMNS = tuple(f"{k}_std" for k in TARGETS)
+VOLT_STD_COLUMNS = tuple(f"{k}_std" for k in VOLT_TARGETS)
 INTERVAL_COLUMNS = tuple(f"{k}_{b}" for b in BOUNDS for k in TARGETS)
 CONDITION_COLUMNS = tuple(c for q in QUANTITIES for c in (q, q.split("_")[0] + "_source"))
 PROVENANCE = ("file", "channel", "direction", "line", "load", "load_unit")
-COLUMNS = (*HEAD, *TARGETS, *STD_COLUMNS, *INTERVAL_COLUMNS, *CONDITION_COLUMNS, *PROVENANCE)
+COLUMNS = (*HEAD, *TARGETS, *VOLT_TARGETS, *STD_COLUMNS, *VOLT_STD_COLUMNS, *INTERVAL_COLUMNS,
+           *CONDITION_COLUMNS, *PROVENANCE)  # fmt: skip
 OK = "ok"
 TABLE_SUFFIXES = (".csv", ".json", ".parquet")
 # trace metadata that is not provenance: the unit is a reading detail, the conditions
 # have their own columns
-_SKIP_META = {"unit", "calibrated", *QUANTITIES}
+_SKIP_META = {"unit", "calibrated", "unusable", *QUANTITIES}
 
 
 class TableFormatError(ValueError):
@@ -76,6 +87,31 @@ def is_missing(value: Any) -> bool:
     if value is None:
         return True
     return isinstance(value, (float, np.floating)) and math.isnan(value)
+
+
+def has_estimate(row: Mapping[str, Any]) -> bool:
+    """True for a row with estimate columns (in nN units or, for volts, in V units)."""
+    return "U0_eV" in row or VOLT_NAMES["U0_eV"] in row
+
+
+def to_volt_columns(row: Mapping[str, Any]) -> dict[str, Any]:
+    """A row estimated on forces in volts, with its columns named and scaled in volts.
+
+    An estimator reading volts as if they were nN gives ``F_mean_nN`` (V), ``K_N_m``
+    (V/nm) and ``U0_eV`` (V nm divided by 1 eV in nN nm); they become ``F_mean_V``,
+    ``K_V_per_nm`` and ``U0_V_nm`` (:data:`VOLT_NAMES`, with their ``_std`` ... suffixes).
+    """
+    out: dict[str, Any] = {}
+    for key, value in row.items():
+        base = next((b for b in VOLT_NAMES if key == b or key.startswith(b + "_")), None)
+        if base is None:
+            out[key] = value
+            continue
+        if base == "U0_eV" and isinstance(value, (int, float, np.number)) \
+                and not is_missing(value):  # fmt: skip
+            value = float(value) * EV_TO_NN_NM
+        out[VOLT_NAMES[base] + key[len(base):]] = value
+    return out
 
 
 def _plain(value: Any) -> Any:

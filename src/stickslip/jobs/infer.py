@@ -29,8 +29,9 @@ from stickslip.diagnostics.report_html import write_report
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.slips import analyse_trace
-from stickslip.estimators.table import OK, ResultTable, failure_row
-from stickslip.traces.readers import collect_traces
+from stickslip.estimators.pairs import add_pair_columns
+from stickslip.estimators.table import OK, VOLT_NAMES, ResultTable, failure_row, has_estimate
+from stickslip.traces.readers import collect_traces, expand_paths
 from stickslip.traces.trace import Trace, TraceReadError
 
 CLASSICAL_BESIDE = ("F_mean_nN", "U0_eV", "K_N_m", "eta", "regime", "quality")
@@ -62,7 +63,7 @@ class InferResult:
     @property
     def refused(self) -> list[int]:
         """Rows without an estimate (unreadable inputs, traces the estimator refused)."""
-        return [i for i, r in enumerate(self.table.rows) if "U0_eV" not in r]
+        return [i for i, r in enumerate(self.table.rows) if not has_estimate(r)]
 
     def error_lines(self) -> list[str]:
         """One line per unreadable input, and per file and reason for refused traces
@@ -83,10 +84,20 @@ class InferResult:
         return lines
 
 
-def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None
+def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None,
+                progress: Progress | None = None
                 ) -> tuple[list[Trace], list[TraceReadError]]:  # fmt: skip
-    """Every trace the inputs hold, and one error per input that cannot be read."""
-    return collect_traces(list(paths), **(reader_options or {}))
+    """Every trace the inputs hold, and one error per input that cannot be read.
+
+    ``progress`` is called with the number of files read so far (see
+    :func:`stickslip.traces.readers.collect_traces`; :func:`count_inputs` gives the total).
+    """
+    return collect_traces(list(paths), progress=progress, **(reader_options or {}))
+
+
+def count_inputs(paths: Sequence[str | os.PathLike]) -> int:
+    """How many files the inputs expand to (folders expanded), for a progress total."""
+    return len(expand_paths(paths)[0])
 
 
 def infer(
@@ -124,15 +135,27 @@ def infer(
     flags = {"lattice_nm": lattice_nm, "velocity_nm_per_s": velocity_nm_per_s,
              "temperature_K": temperature_K}  # fmt: skip
     table = estimator.predict(traces, **flags)
+    # both scan directions of a map line: the pair's friction, free of the offset
+    n_pairs = add_pair_columns(table.rows, traces)
+    if n_pairs:
+        table.notes.append(f"{n_pairs} trace/retrace pair(s): friction_pair_* is the mean of "
+                           "both directions' friction, free of offsets that do not reverse "
+                           "with the scan")  # fmt: skip
     if classical and estimator.kind != "classical" and traces:
-        beside = ClassicalEstimator().predict(traces, **flags)
+        cl_estimator = ClassicalEstimator()
+        cl_estimator.domain_verdict = False  # only its estimates are shown beside
+        beside = cl_estimator.predict(traces, **flags)
         for row, cl in zip(table.rows, beside.rows, strict=True):
             row.update({f"classical_{k}": cl.get(k) for k in CLASSICAL_BESIDE})
     result = InferResult(table=table, traces=[*traces])
     if check:
         result.replicates = _check(table, traces, progress)
+    verdict = getattr(estimator, "domain_verdict", False)
     for e in read_errors:
         table.rows.append(failure_row(Path(e.path).stem, e.reason, estimator.name, file=e.path))
+        if verdict:
+            table.rows[-1].update(in_domain=False, domain_score=None,
+                                  domain_reason=f"no estimate: {e.reason}")  # fmt: skip
         result.traces.append(None)
     result.read_errors = list(read_errors)
     return result
@@ -144,32 +167,47 @@ def ppc_seed(name: str) -> int:
     return 1_000_003 + zlib.crc32(name.encode())
 
 
+#: Traces per simulate call of the check: large enough to keep every core busy, small
+#: enough for a progress bar to move.
+CHECK_BATCH = 32
+
+
 def _check(table: ResultTable, traces: Sequence[Trace], progress: Progress | None
            ) -> dict[int, np.ndarray]:  # fmt: skip
-    """Posterior predictive check of the estimated rows, batched by trace length."""
+    """Posterior predictive check of the estimated rows, in batches of traces sharing
+    their pixel layout (:data:`CHECK_BATCH` per simulate call, progress after each)."""
     todo = [i for i, row in enumerate(table.rows[: len(traces)])
             if row.get("quality") == OK and np.isfinite(row.get("U0_eV", np.nan))]  # fmt: skip
+    n_volts = sum(1 for row in table.rows[: len(traces)]
+                  if row.get("quality") == OK and "U0_V_nm" in row)  # fmt: skip
+    if n_volts:
+        table.notes.append(f"--check skipped for {n_volts} trace(s) in volts: the PT model "
+                           "is simulated in nN (pass --calibration)")  # fmt: skip
     reps: dict[int, np.ndarray] = {}
-    sizes = Counter(traces[i].n for i in todo)
+    layouts: dict[tuple[int, float], list[int]] = {}
+    for i in todo:
+        layouts.setdefault((traces[i].n, round(traces[i].pixel_nm, 9)), []).append(i)
     done = 0
-    for size in sizes:
-        idx = [i for i in todo if traces[i].n == size]
-        rows = [table.rows[i] for i in idx]
-        r = posterior_predictive_check(
-            traces[idx[0]].x_nm, np.stack([traces[i].force_nN for i in idx]),
-            np.array([row["U0_eV"] for row in rows]), np.array([row["K_N_m"] for row in rows]),
-            lattice_nm=np.array([row["lattice_nm"] for row in rows]),
-            velocity_nm_per_s=np.array([row["velocity_nm_per_s"] for row in rows]),
-            temperature_K=np.array([row["temperature_K"] for row in rows]),
-            seed=ppc_seed(traces[idx[0]].name),
-        )  # fmt: skip
-        for k, (i, row) in enumerate(zip(idx, rows, strict=True)):
-            row["gof"] = float(r.gof[k])
-            row["ppc_flag"] = int(r.flagged[k])
-            reps[i] = r.replicate_nN[k]
-        done += len(idx)
-        if progress is not None:
-            progress(done)
+    for group in layouts.values():
+        for start in range(0, len(group), CHECK_BATCH):
+            idx = group[start: start + CHECK_BATCH]
+            rows = [table.rows[i] for i in idx]
+            r = posterior_predictive_check(
+                traces[idx[0]].x_nm, np.stack([traces[i].force_nN for i in idx]),
+                np.array([row["U0_eV"] for row in rows]),
+                np.array([row["K_N_m"] for row in rows]),
+                lattice_nm=np.array([row["lattice_nm"] for row in rows]),
+                velocity_nm_per_s=np.array([row["velocity_nm_per_s"] for row in rows]),
+                temperature_K=np.array([row["temperature_K"] for row in rows]),
+                seed=ppc_seed(traces[idx[0]].name),
+            )  # fmt: skip
+            for k, (i, row) in enumerate(zip(idx, rows, strict=True)):
+                row["gof"] = float(r.gof[k])
+                row["ppc_flag"] = int(r.flagged[k])
+                reps[i] = r.replicate_nN[k]
+            done += len(idx)
+            if progress is not None:
+                progress(done)
     return reps
 
 
@@ -178,7 +216,7 @@ def write_outputs(result: InferResult, out: str | os.PathLike, title: str = "est
     """Write the table (format from the extension) and, where lines carry loads, the
     per-load summary beside it; returns the paths written."""
     written = [result.table.write(out)]
-    estimated = [r for r in result.table.rows if "U0_eV" in r]
+    estimated = [r for r in result.table.rows if has_estimate(r)]
     written += write_load_report(estimated, out, f"{title} versus load")
     return written
 
@@ -194,11 +232,18 @@ def _interval(row: dict[str, Any], key: str, unit: str) -> str:
     return text + (f" [{lo:.3g}, {hi:.3g}]" if lo is not None and hi is not None else "")
 
 
-def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.PathLike
-                 ) -> list[Path]:  # fmt: skip
+def count_panels(result: InferResult) -> int:
+    """How many panels :func:`write_panels` draws at most (for a progress total)."""
+    return sum(t is not None for t in result.traces)
+
+
+def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.PathLike,
+                 progress: Progress | None = None) -> list[Path]:  # fmt: skip
     """One PNG per estimated trace in ``out_dir``, drawn for the estimator's kind:
-    classical (stick fits and slips), window (window-wise estimates), line (the trace,
-    and after a check the PT model at the estimate; 95 % intervals in the title)."""
+    classical (stick fits and slips; axes in V for a trace in volts), window
+    (window-wise estimates), line (the trace, and after a check the PT model at the
+    estimate; 95 % intervals in the title). ``progress`` is called with the number of
+    traces done."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
@@ -212,9 +257,11 @@ def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.Pa
         by_row = dict(zip(idx, ests, strict=True))
     for n, (i, row, t) in enumerate(rows):
         path = out / f"{n:03d}_{safe_name(row['trace'])}.png"
+        if progress is not None and n:
+            progress(n)
         if estimator.kind == "classical":
             plot_trace_diagnostics(path, t.x_nm, t.force_nN, analyse_trace(t.x_nm, t.force_nN),
-                                   row)  # fmt: skip
+                                   row, unit="V" if "U0_V_nm" in row else "nN")  # fmt: skip
         elif estimator.kind == "window" and i in by_row:
             e = by_row[i]
             ref = {k: float(row.get(f"classical_{k}") or np.nan) for k in ("U0_eV", "K_N_m", "eta")}
@@ -231,13 +278,19 @@ def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.Pa
         else:
             continue
         paths.append(path)
+    if progress is not None and rows:
+        progress(len(rows))
     return paths
 
 
 def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit: int = 40) -> str:
     """A compact terminal table of the estimated rows: estimates, +- their std (or the
-    95 % interval), the classical estimator's U0 and K beside, true values if known."""
-    rows = table.ok()
+    95 % interval), the classical estimator's U0 and K beside, true values if known.
+    Rows in volts (no calibration) give their values in V, V nm and V/nm, and say so."""
+    rows = [r if "U0_V_nm" not in r else {**r, **{k: r.get(v) for k, v in VOLT_NAMES.items()},
+                                          **{f"{k}_std": r.get(f"{v}_std")
+                                             for k, v in VOLT_NAMES.items()}}
+            for r in table.ok()]  # fmt: skip
     w = min(max([len(r["trace"]) for r in rows] + [5]), 40) + 1
     has_cl = any("classical_U0_eV" in r for r in rows)
     head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>16}{'K N/m':>16}{'eta':>8}"
@@ -261,6 +314,8 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
         if truth and r["trace"] in truth:
             t = truth[r["trace"]]
             s += f"{t.get('U0_eV', np.nan):>10.3f}{t.get('K_N_m', np.nan):>7.2f}"
+        if "U0_V_nm" in r:
+            s += "  (in V, V nm, V/nm: no calibration)"
         lines.append(s)
     if len(rows) > limit:
         lines.append(f"... {len(rows) - limit} more rows in the table")

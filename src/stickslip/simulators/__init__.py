@@ -3,8 +3,8 @@
 - :func:`simulate` -- per-trajectory parameters in, pixel-averaged traces out,
 - :func:`run_sweep` -- sample the training range and write a chunked HDF5 dataset,
 - settings dataclasses in :mod:`stickslip.simulators.config`,
-- the numba kernel (:mod:`.kernel`) and the numpy reference (:mod:`.reference`) behind
-  the backend interface (:mod:`.backends`).
+- the numba kernel (:mod:`.kernel`), the CUDA kernel (:mod:`.cuda`) and the numpy
+  reference (:mod:`.reference`) behind the backend interface (:mod:`.backends`).
 """
 
 from stickslip.simulators.config import (

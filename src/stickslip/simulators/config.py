@@ -159,7 +159,15 @@ LAB_SUBSTRATE = SubstrateAugmentation(
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """Everything needed to regenerate a dataset from its file alone."""
+    """Everything needed to regenerate a dataset from its file alone.
+
+    ``backend`` is the simulator backend (:mod:`stickslip.simulators.backends`). The JSON
+    records it only when it is not ``cpu``: the CPU kernel gives the same traces on every
+    machine, while a GPU backend's traces equal them only to rounding (and, at finite T,
+    only statistically once a thermally activated slip goes the other way), so a dataset
+    made on a GPU is regenerated exactly only by the same backend. ``cpu`` files keep the
+    JSON they had before backends existed.
+    """
 
     physics: PhysicalSettings = field(default_factory=PhysicalSettings)
     ranges: ParameterRange = field(default_factory=ParameterRange)
@@ -167,9 +175,13 @@ class SweepConfig:
     n: int = 1600
     seed: int = 0
     preset: str = "paper"
+    backend: str = "cpu"
 
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        d = dataclasses.asdict(self)
+        if d["backend"] in ("cpu", "numba"):
+            del d["backend"]
+        return json.dumps(d, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> SweepConfig:
@@ -183,6 +195,7 @@ class SweepConfig:
             n=d["n"],
             seed=d["seed"],
             preset=d["preset"],
+            backend=d.get("backend", "cpu"),
         )
 
 

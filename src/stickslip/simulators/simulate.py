@@ -66,7 +66,7 @@ def simulate(
     modulation: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     defects: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     samples_per_pixel: int = 0,
-    backend: str = "numba",
+    backend: str = "cpu",
 ) -> SimulationResult:
     """Simulate finite-temperature Prandtl-Tomlinson friction traces (BAOAB, float64).
 
@@ -90,8 +90,11 @@ def simulate(
     samples_per_pixel : int
         If > 0, also return the instantaneous tip position and force this many times
         per pixel (diagnostics).
-    backend : {"numba", "numpy"}
-        Integrator backend; ``numpy`` is the slow reference.
+    backend : {"cpu", "cuda", "cuda-float32", "auto", "numpy"}
+        Integrator backend (:mod:`stickslip.simulators.backends`): ``cpu`` (alias
+        ``numba``) is the numba kernel, ``cuda`` the GPU kernel (same random streams),
+        ``auto`` picks ``cuda`` when a CUDA device is present, ``numpy`` is the slow
+        reference.
 
     Returns
     -------

@@ -20,9 +20,12 @@ from stickslip.traces.formats.bruker import read_bruker
 from stickslip.traces.formats.common import ScanFile
 from stickslip.traces.formats.gwyddion import read_gwy
 from stickslip.traces.formats.hdf5 import read_h5
+from stickslip.traces.formats.jpk import read_jpk
 from stickslip.traces.formats.maps import apply_load_schedule, map_to_traces
+from stickslip.traces.formats.mdt import read_mdt
 from stickslip.traces.formats.nanosurf import read_nid
 from stickslip.traces.formats.text import read_npy, read_text
+from stickslip.traces.formats.zarr_store import read_zarr
 from stickslip.traces.trace import Trace, TraceReadError
 
 Reader = Callable[..., list[Trace]]
@@ -33,6 +36,8 @@ SCAN_READERS: dict[str, ScanReader] = {
     ".nid": read_nid,
     ".ibw": read_ibw,
     ".gwy": read_gwy,
+    ".mdt": read_mdt,
+    ".jpk": read_jpk,
 }
 READERS: dict[str, Reader] = {
     ".csv": read_text,
@@ -40,6 +45,7 @@ READERS: dict[str, Reader] = {
     ".npy": read_npy,
     ".h5": read_h5,
     ".hdf5": read_h5,
+    ".zarr": read_zarr,  # a folder: a Zarr store is one dataset, never expanded
 }
 _BRUKER_NUMBERED = re.compile(r"^\.\d{3}$")
 
@@ -53,6 +59,12 @@ def is_readable_suffix(path: Path) -> bool:
     """True if a reader is registered for the file's suffix."""
     s = _suffix(path)
     return s in READERS or s in SCAN_READERS
+
+
+def is_dataset_dir(path: str | os.PathLike) -> bool:
+    """True for a folder that is one dataset (a ``.zarr`` store), not a folder of traces."""
+    p = Path(path)
+    return p.suffix.lower() == ".zarr" and p.is_dir()
 
 
 def is_scan_file(path: str | os.PathLike) -> bool:
@@ -76,7 +88,7 @@ def _existing(path: str | os.PathLike) -> Path:
         raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}'")
     if not p.exists():
         raise TraceReadError(p, "file not found")
-    if p.is_dir():
+    if p.is_dir() and not is_dataset_dir(p):
         raise TraceReadError(p, "is a directory")
     return p
 
@@ -132,6 +144,8 @@ def read_trace_csv(path: str | os.PathLike, calibration_nN_per_V: float | None =
 def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[TraceReadError]]:
     """Expand folders into the trace files they hold (sorted); files are kept as given.
 
+    A ``.zarr`` store is a dataset, kept as given (also inside an expanded folder).
+
     Returns the paths and one error per empty argument: ``Path("")`` is the current
     folder, so an empty argument (an unset shell variable) would otherwise read every
     trace there, some of them twice.
@@ -143,15 +157,18 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[T
             errors.append(TraceReadError("''", "empty path"))
             continue
         p = Path(raw)
-        if p.is_dir():
-            out.extend(sorted(q for q in p.iterdir() if q.is_file() and is_readable_suffix(q)))
+        if p.is_dir() and not is_dataset_dir(p):
+            out.extend(sorted(q for q in p.iterdir()
+                              if (q.is_file() or is_dataset_dir(q)) and is_readable_suffix(q)))
         else:
             out.append(p)
     return out, errors
 
 
 def collect_traces(
-    paths: Sequence[str | os.PathLike], **options: Any
+    paths: Sequence[str | os.PathLike],
+    progress: Callable[[int], None] | None = None,
+    **options: Any,
 ) -> tuple[list[Trace], list[TraceReadError]]:
     """Read every trace from files and folders, never stopping at a bad file.
 
@@ -159,6 +176,8 @@ def collect_traces(
     ----------
     paths : sequence of path-like
         Trace files, vendor files or folders of them.
+    progress : callable, optional
+        Called with the number of files read so far, after each file.
     **options
         Passed to the format readers (e.g. ``calibration_nN_per_V``).
 
@@ -171,9 +190,11 @@ def collect_traces(
     """
     traces: list[Trace] = []
     files, errors = expand_paths(paths)
-    for p in files:
+    for k, p in enumerate(files, 1):
         try:
             traces.extend(read_file(p, **options))
         except TraceReadError as e:
             errors.append(e)
+        if progress is not None:
+            progress(k)
     return traces, errors

@@ -30,7 +30,7 @@ from numba import njit, prange
 
 import stickslip.estimators.classical.slips as sl
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
-from stickslip.estimators.base import TraceEstimator
+from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert
 from stickslip.units import EV_TO_NN_NM
 
@@ -72,8 +72,8 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     out[WINDOW] = w
     out[FRAC_MULTIPLE] = 0.0
     if ns == 0:
-        span = sl._force_range(x, F)
-        out[STATUS] = 3 if span < 10.0 * sigma else 2
+        # no scale at which the trace stands above its noise: too noisy; else smooth
+        out[STATUS] = 3 if w == 0 else 2
         return
     # spread of the mean force over stick-slip cycles
     if ns >= 2:
@@ -327,6 +327,7 @@ class ClassicalEstimator(TraceEstimator):
     name = "classical"
     kind = "classical"
     intervals = False
+    accepts_volts = True  # slopes and peaks scale with the force unit: estimates in V units
 
     def __init__(self, mass_kg: float = PAPER_MASS_KG, damping_per_s: float = PAPER_DAMPING_PER_S,
                  reference: Reference = GRAPHITE) -> None:  # fmt: skip
@@ -339,10 +340,12 @@ class ClassicalEstimator(TraceEstimator):
 
     def estimate(self, traces: Sequence[Any], conditions: Sequence[Conditions]
                  ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
+        # the thermal correction compares energies with kT: not possible in volts
+        volts = np.array([in_volts(t) for t in traces], dtype=bool)
         table = estimate_array(
             [t.x_nm for t in traces], [t.force_nN for t in traces],
             np.array([c.lattice_nm for c in conditions]),
-            np.array([c.temperature_K for c in conditions]),
+            np.where(volts, 0.0, [c.temperature_K for c in conditions]),
             np.array([c.velocity_nm_per_s for c in conditions]),
             mass_kg=self.mass_kg, damping_per_s=self.damping_per_s,
         )  # fmt: skip
@@ -353,4 +356,9 @@ class ClassicalEstimator(TraceEstimator):
             res.update({f"{k}_std": d[f"{k}_std"] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")})
             res.update({k: d[k] for k in CLASSICAL_COLUMNS})
             out.append(res)
-        return out, []
+        notes = []
+        if volts.any():
+            notes.append(f"{int(volts.sum())} trace(s) in volts (no --calibration): <F>, U0 "
+                         "and K in V, V nm and V/nm, without the thermal correction of the "
+                         "peak force")  # fmt: skip
+        return out, notes

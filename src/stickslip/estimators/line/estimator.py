@@ -2,19 +2,101 @@
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
+from importlib import resources
 from typing import Any
 
 import numpy as np
 
 from stickslip.conditions import Conditions
 from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.line.ensemble import LineEnsemble, predict_raw_lines
+from stickslip.estimators.domain import EmbeddingReference
+from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, TARGETS
 from stickslip.traces.trace import Trace
 
 TEMPERATURE_TOLERANCE_K = 1.0
+#: The bundled model's embedding reference (``benchmarks/domain.py --write-reference``).
+DOMAIN_REFERENCE = "line_domain.npz"
+
+
+def fingerprint(ens: LineEnsemble) -> str:
+    """A digest of the members' weights: names the model an embedding reference is for."""
+    h = hashlib.sha256()
+    for m in ens.members:
+        for name, tensor in sorted(m.state_dict().items()):
+            h.update(name.encode())
+            h.update(tensor.detach().cpu().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def bundled_reference() -> EmbeddingReference | None:
+    """The embedding reference shipped with the package (None if it is missing)."""
+    path = resources.files("stickslip") / "resources" / DOMAIN_REFERENCE
+    if not path.is_file():
+        return None
+    with resources.as_file(path) as p:
+        return EmbeddingReference.load(p)
+
+
+def pooled_features(ens: LineEnsemble, x_nm: Sequence[np.ndarray],
+                    force_nN: Sequence[np.ndarray], lattice_nm: np.ndarray,
+                    velocity_nm_per_s: np.ndarray
+                    ) -> tuple[LinePrediction, np.ndarray | None]:  # fmt: skip
+    """:func:`predict_raw_lines`, and what each member's head read for each line (the
+    pooled CNN features, conditioning and expert inputs), (members, N, D).
+
+    The features are caught on their way into each member's head during the one forward
+    pass, so they cost nothing. Traces are predicted in groups that map to lines of one
+    length (same samples, pixel and lattice), in which the members read the lines in
+    input order; features are None if a group's count does not match (never expected).
+    """
+    n = len(force_nN)
+    groups: dict[tuple[int, float, float], list[int]] = {}
+    for i in range(n):
+        x = np.asarray(x_nm[i])
+        pixel = (x[-1] - x[0]) / max(x.size - 1, 1)
+        groups.setdefault((x.size, round(float(pixel), 12), round(float(lattice_nm[i]), 12)),
+                          []).append(i)  # fmt: skip
+    caught: list[list[np.ndarray]] = [[] for _ in ens.members]
+
+    def catcher(k: int):
+        def hook(module, inputs) -> None:
+            caught[k].append(inputs[0].detach().numpy().copy())
+        return hook
+
+    handles = [m.head.register_forward_pre_hook(catcher(k)) for k, m in enumerate(ens.members)]
+    parts: list[tuple[list[int], LinePrediction, np.ndarray | None]] = []
+    try:
+        for idx in groups.values():
+            for c in caught:
+                c.clear()
+            pred = predict_raw_lines(ens, [x_nm[i] for i in idx], [force_nN[i] for i in idx],
+                                     lattice_nm[idx], velocity_nm_per_s[idx])  # fmt: skip
+            feats = None
+            if all(c and sum(len(a) for a in c) == len(idx) for c in caught):
+                feats = np.stack([np.concatenate(c) for c in caught])
+            parts.append((idx, pred, feats))
+    finally:
+        for h in handles:
+            h.remove()
+    if len(parts) == 1 and parts[0][0] == list(range(n)):
+        return parts[0][1], parts[0][2]
+    out = LinePrediction({}, {}, {}, {}, {}, {})
+    for field in ("values", "std", *BOUNDS):
+        for k in TARGETS:
+            arr = np.empty(n)
+            for idx, pred, _ in parts:
+                arr[idx] = getattr(pred, field)[k]
+            getattr(out, field)[k] = arr
+    feats = None
+    if all(f is not None for _, _, f in parts):
+        feats = np.empty((len(ens.members), n, parts[0][2].shape[-1]))
+        for idx, _, f in parts:
+            feats[:, idx] = f
+    return out, feats
 
 
 class LineEstimator(TraceEstimator):
@@ -30,10 +112,16 @@ class LineEstimator(TraceEstimator):
     intervals = True
     name = "line-cnn"
 
-    def __init__(self, ensemble: LineEnsemble, source: str = "bundled") -> None:
+    def __init__(self, ensemble: LineEnsemble, source: str = "bundled",
+                 embedding_reference: EmbeddingReference | None = None) -> None:  # fmt: skip
+        """``embedding_reference``: where the model's pooled features lie on training-like
+        lines (default: the bundled one, used only if it was made for this model)."""
         self.ensemble = ensemble
         self.source = source
         self.reference = ensemble.spec.reference
+        ref = embedding_reference or bundled_reference()
+        self.embedding_reference = ref if ref is not None and ref.fingerprint == fingerprint(
+            ensemble) else None  # fmt: skip
 
     def describe(self) -> str:
         return (f"whole-line CNN ensemble of {len(self.ensemble.members)} with calibrated "
@@ -55,15 +143,24 @@ class LineEstimator(TraceEstimator):
                          "estimates are extrapolated")  # fmt: skip
         if not ok:
             return out, notes
-        pred = predict_raw_lines(
-            self.ensemble, [traces[i].x_nm for i in ok], [traces[i].force_nN for i in ok],
-            np.array([conditions[i].lattice_nm for i in ok]),
-            np.array([conditions[i].velocity_nm_per_s for i in ok]),
-        )  # fmt: skip
+        args = ([traces[i].x_nm for i in ok], [traces[i].force_nN for i in ok],
+                np.array([conditions[i].lattice_nm for i in ok]),
+                np.array([conditions[i].velocity_nm_per_s for i in ok]))  # fmt: skip
+        ref = self.embedding_reference if self.domain_verdict else None
+        if ref is None:
+            pred, dist = predict_raw_lines(self.ensemble, *args), None
+            if self.domain_verdict:
+                notes.append("no embedding reference for this model: the domain verdict "
+                             "reads the traces and the estimates only")  # fmt: skip
+        else:
+            pred, feats = pooled_features(self.ensemble, *args)
+            dist = None if feats is None else ref.distance(feats)
         for j, i in enumerate(ok):
             row: dict[str, Any] = {k: float(pred.values[k][j]) for k in TARGETS}
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
             for b in BOUNDS:
                 row.update({f"{k}_{b}": float(getattr(pred, b)[k][j]) for k in TARGETS})
+            if dist is not None:
+                row["domain_embedding"] = float(dist[j])
             out[i] = row
         return out, notes

@@ -9,9 +9,16 @@ Conventions (see docs/formats.md):
 - Positions: ``x_nm = i * scan_size_nm / pixels`` (from 0 at the first recorded
   pixel of the line, in the scan direction).
 - Forces: a channel in newtons is converted to nN; a channel in volts is multiplied
-  by the calibration factor (nN/V) stored in the file, else the one passed as
-  ``calibration_nN_per_V``; without either it stays in volts and the trace's meta
-  says ``unit="V"``, ``calibrated=False``.
+  by the calibration factor (nN/V) passed as ``calibration_nN_per_V`` (the user's
+  ``--calibration``), else the one stored in the file; without either it stays in volts
+  and the trace's meta says ``unit="V"``, ``calibrated=False``. The factor used and its
+  source (``flag`` or ``file``) are in ``meta["calibration_nN_per_V"]`` and
+  ``meta["calibration_source"]``.
+- Missing pixels (NaN or inf) are interpolated linearly along the line and counted in
+  ``meta["masked_pixels"]`` (on every line of a map that has any); a line with more than
+  :data:`MAX_NAN_FRACTION` of its pixels missing, or a gap longer than
+  :data:`MAX_NAN_RUN` pixels, is kept with ``meta["unusable"]`` saying why, and no
+  estimator reads it.
 - Friction loop of a line: ``(trace - retrace) / 2`` (both in x order, raw sign),
   its mean is the friction, ``(trace + retrace) / 2`` the lateral offset.
 - Lines are numbered in the order the file stores them (0-based).
@@ -22,7 +29,7 @@ Reader options
 :func:`stickslip.traces.collect_traces` (and so to every reader). Keys, all optional:
 
 ``calibration_nN_per_V`` (float > 0)
-    Lateral calibration used for channels in volts when the file stores none.
+    Lateral calibration for channels in volts; it wins over one stored in the file.
 ``lines_per_load`` (int >= 1)
     Consecutive lines recorded at one load; sets ``meta["load_group"]`` and, with
     ``loads``, ``meta["load"]`` on every trace that has a ``line``.
@@ -63,6 +70,11 @@ from stickslip.traces.trace import Trace, TraceReadError
 LOOP = "loop"
 DIRECTIONS = (TRACE, RETRACE, LOOP)
 DEFAULT_DIRECTIONS = (TRACE, RETRACE)
+#: A line with more missing (NaN) pixels than this fraction is not estimated.
+MAX_NAN_FRACTION = 0.25
+#: Nor is a line with a longer run of missing pixels (interpolating over it would
+#: invent a stick-slip cycle or more).
+MAX_NAN_RUN = 4
 
 
 def reader_options(
@@ -209,7 +221,8 @@ def map_to_traces(
     scan : ScanFile
         What a vendor reader extracted.
     calibration_nN_per_V : float, optional
-        Used for channels in volts when ``scan.meta`` has no ``calibration_nN_per_V``.
+        Used for channels in volts; wins over ``scan.meta["calibration_nN_per_V"]``
+        (a calibration stored in the file).
     directions : sequence of str
         Which of ``"trace"``, ``"retrace"``, ``"loop"`` to emit.
     scan_size_nm : float, optional
@@ -232,12 +245,15 @@ def map_to_traces(
         found = ", ".join(f"{c.name} ({c.direction or '?'})" for c in scan.channels)
         found = f"found: {found}" if found else "no image channels: a force curve or spectrum?"
         raise TraceReadError(path, f"no lateral-force channel ({found})")
-    cal = scan.meta.get("calibration_nN_per_V") or calibration_nN_per_V
+    stored = scan.meta.get("calibration_nN_per_V")
+    cal = calibration_nN_per_V if calibration_nN_per_V is not None else stored
+    cal_meta = {"calibration_nN_per_V": cal,
+                "calibration_source": "flag" if calibration_nN_per_V is not None else "file"}
     size = scan.scan_size_nm or scan_size_nm
     traces: list[Trace] = []
     for name, tr, rt in pair_channels(lateral):
         images: dict[str, np.ndarray] = {}
-        unit, calibrated = "V", False
+        unit, calibrated, volts = "V", False, False
         for direction, ch in ((TRACE, tr), (RETRACE, rt)):
             if ch is None or ch.data is None:
                 continue
@@ -245,7 +261,13 @@ def map_to_traces(
                 images[direction], unit, calibrated = to_force(ch.data, ch.unit, cal)
             except ValueError as e:
                 raise TraceReadError(path, f"channel {ch.name}: {e}") from None
-        traces.extend(_line_traces(scan, name, images, unit, calibrated, size, directions))
+            volts = volts or volt_scale_to_V(ch.unit) is not None
+        lines = _line_traces(scan, name, images, unit, calibrated, size, directions)
+        for t in lines:
+            t.meta.pop("calibration_nN_per_V", None)  # the file's, perhaps not the one used
+            if volts and cal is not None:
+                t.meta.update(cal_meta)
+        traces.extend(lines)
     if not traces:
         raise TraceReadError(path, "no traces for the requested directions")
     return traces
@@ -264,6 +286,10 @@ def _line_traces(
     n_lines, n_px = first.shape
     if TRACE in images and RETRACE in images and images[TRACE].shape != images[RETRACE].shape:
         raise TraceReadError(scan.path, f"channel {channel}: trace and retrace differ in shape")
+    missing = {d: ~np.isfinite(img) for d, img in images.items()}
+    any_missing = any(m.any() for m in missing.values())
+    if any_missing:
+        images = {d: fill_missing(img, missing[d]) for d, img in images.items()}
     x = np.arange(n_px, dtype=float) * (size_nm / n_px if size_nm else 1.0)
     loops = None
     if TRACE in images and RETRACE in images:
@@ -294,6 +320,8 @@ def _line_traces(
             if f is None:
                 continue
             meta = dict(base_meta, direction=direction, line=line)
+            if any_missing:
+                meta.update(_masked(_missing_of(missing, direction, line)))
             if loops is not None:
                 meta["loop_friction"] = float(loops[0][line])
                 meta["loop_offset"] = float(loops[1][line])
@@ -307,6 +335,38 @@ def _line_traces(
                 )
             )
     return out
+
+
+def fill_missing(image: np.ndarray, missing: np.ndarray) -> np.ndarray:
+    """A copy of ``image`` (lines, pixels) with its ``missing`` pixels interpolated
+    linearly along each line (the nearest value at the ends; zeros for an empty line)."""
+    out = np.array(image, dtype=float)
+    idx = np.arange(out.shape[1])
+    for line in np.flatnonzero(missing.any(axis=1)):
+        bad = missing[line]
+        out[line, bad] = np.interp(idx[bad], idx[~bad], out[line, ~bad]) if not bad.all() else 0.0
+    return out
+
+
+def _missing_of(missing: Mapping[str, np.ndarray], direction: str, line: int) -> np.ndarray:
+    """Missing pixels of one line in the trace's own x order."""
+    if direction == TRACE:
+        return missing[TRACE][line]
+    if direction == RETRACE:
+        return missing[RETRACE][line][::-1]
+    return missing[TRACE][line] | missing[RETRACE][line]
+
+
+def _masked(bad: np.ndarray) -> dict[str, Any]:
+    """``masked_pixels`` of a line, and ``unusable`` where too much of it is missing."""
+    n = int(bad.sum())
+    meta: dict[str, Any] = {"masked_pixels": n}
+    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    run = int((np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)).max()) if n else 0
+    if n > MAX_NAN_FRACTION * bad.size or run > MAX_NAN_RUN:
+        meta["unusable"] = (f"{n} of {bad.size} pixels are NaN (longest gap {run}): too much "
+                            "of the line is missing to estimate it")  # fmt: skip
+    return meta
 
 
 def assign_loads(

@@ -14,7 +14,8 @@ whitespace separated; ``#`` lines are comments):
 
 ``.npy``: a structured array with the same field names; a plain ``(n, 2)`` array
 ``x_nm, force_nN``; or a 1-D array of forces in nN (positions from ``scan_size_nm``,
-else pixel indices).
+else pixel indices, ``meta["x_unit"] == "px"``: no estimator reads them as nm). The same
+for a one-column ``force_nN`` file.
 """
 
 from __future__ import annotations
@@ -85,6 +86,11 @@ def read_text(path: Path, **options: Any) -> list[Trace]:
     """Read the traces of a CSV/TXT file in any recognised layout."""
     rows = read_rows(path)
     if all(_is_number(c) for c in rows[0]):
+        if len(rows[0]) < 3:
+            raise TraceReadError(
+                path, f"no header: {len(rows[0])} column(s) of numbers, no x axis or unit "
+                "named; add a header x_nm,force_nN (or x_nm,force_V), or give 3 columns "
+                "index,trace,retrace")
         if len(rows[0]) != 3:
             raise TraceReadError(
                 path, f"{NEEDED}; a file without header must have 3 columns index,trace,retrace"
@@ -132,7 +138,8 @@ def traces_from_columns(
         return _loop_traces(path, col[tcol], col[rcol], _unit_of(tcol), x, **options)
     if fcol and (xcol or len(header) == 1):
         x = col[xcol] * _X_COLS[xcol] if xcol else _positions(data.shape[0], options)
-        return [_single_trace(path, x, col[fcol], _FORCE_COLS[fcol], options)]
+        pixels = xcol is None and not options.get("scan_size_nm")
+        return [_single_trace(path, x, col[fcol], _FORCE_COLS[fcol], options, pixels)]
     raise TraceReadError(path, f"{NEEDED} (found {','.join(header)})")
 
 
@@ -142,12 +149,17 @@ def _positions(n: int, options: dict[str, Any]) -> np.ndarray:
 
 
 def _single_trace(
-    path: Path, x: np.ndarray, f: np.ndarray, unit: str, options: dict[str, Any]
+    path: Path, x: np.ndarray, f: np.ndarray, unit: str, options: dict[str, Any],
+    pixels: bool = False,
 ) -> Trace:
+    """One trace; ``pixels``: ``x`` holds pixel indices (no x axis in the file), which
+    ``meta["x_unit"] == "px"`` says (no estimator reads such a trace as nm)."""
     force, out_unit, calibrated = to_force(f, unit, options.get("calibration_nN_per_V"))
     x, force = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(force, dtype=float)
     validate_trace(x, force, str(path))
     meta = {"file": str(path), "unit": out_unit, "calibrated": calibrated}
+    if pixels:
+        meta["x_unit"] = "px"
     return Trace(x_nm=x, force_nN=force, name=path.stem, source=str(path), meta=meta)
 
 

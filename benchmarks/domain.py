@@ -1,0 +1,245 @@
+"""The in/out-of-domain verdict: its rates on PT and non-PT traces, and what it costs.
+
+Sets (each drawn from a seed; the verdict's thresholds were tuned on seed 1 and its lab
+bench on seed ``BENCH_SEED + 1``, the figures are reported on other seeds):
+
+- non-PT traces (must come out of domain), stated lattice 0.246 nm, 11 nm as 512 px:
+  white noise, a random walk, flat lines, square waves, a reversed sawtooth (PT traces
+  reversed in x or sign-flipped: slow fall, sudden rise), smooth sliding (simulated
+  with 0.2 <= eta <= 0.95), and single-slip stick-slip simulated on a lattice 0.6x
+  the stated one (0.1476 nm, stated 0.246). The simulated ones carry the lab bench's
+  instrument effects on half of their lines;
+- PT traces (must stay in domain): clean paper-preset simulations (the training range,
+  1.2 <= eta <= 40), and the lab bench (:mod:`stickslip.simulators.bench`: three
+  lattices, 30 nm/s, modulation, defects, detector effects).
+
+Prints, per set, the fraction of rows in domain with the line model (the default) and
+the classical estimator, the reasons given, and the line model's throughput
+(:meth:`LineEstimator.predict` on ``--n-speed`` traces) with and without the verdict,
+timed alternately in the same sitting, and the machine. Sets are cached under
+``--work`` (default build/domain, git-ignored).
+
+Usage: python benchmarks/domain.py [--seed 2] [--bench-seed 20261121] [--n 200]
+       [--n-speed 5000] [--repeats 3] [--threads 2] [--work build/domain] [--skip-speed]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from stickslip.simulators import PhysicalSettings, simulate
+from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing
+from stickslip.simulators.config import ParameterRange
+from stickslip.simulators.instrument import LAB, apply_instrument
+from stickslip.simulators.sampling import sample_parameters
+from stickslip.traces.dataset import dataset_traces, load_dataset
+from stickslip.traces.trace import Trace
+from stickslip.units import eta_from
+
+ROOT = Path(__file__).resolve().parents[1]
+LATTICE_NM = 0.246
+NON_PT = ("white_noise", "random_walk", "flat", "square_wave", "reversed_sawtooth",
+          "smooth_sliding", "lattice_0.6")  # fmt: skip
+PT = ("clean", "lab_bench")
+X_NM = np.arange(512) * (11.0 / 512)
+
+
+def _loguniform(rng: np.random.Generator, lo: float, hi: float, n: int) -> np.ndarray:
+    return np.exp(rng.uniform(np.log(lo), np.log(hi), n))
+
+
+def _lab_half(force: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The lab bench's instrument effects on every other line (the rest stay clean)."""
+    out = force.copy()
+    out[1::2] = apply_instrument(force[1::2], LAB, rng)[0]
+    return out
+
+
+def _simulated(U0: np.ndarray, K: np.ndarray, seed: int, lattice_nm: float
+               ) -> dict[str, np.ndarray]:  # fmt: skip
+    """Clean paper-preset lines on ``lattice_nm`` with their truths."""
+    n = U0.size
+    f = simulate(U0, K, PhysicalSettings(), seed=seed, lattice_nm=np.full(n, lattice_nm)).force_nN
+    return {"force_nN": f, "U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, lattice_nm),
+            "F_mean_nN": f.mean(axis=1)}  # fmt: skip
+
+
+def _pt_lines(n: int, seed: int, eta: tuple[float, float], lattice_nm: float
+              ) -> dict[str, np.ndarray]:  # fmt: skip
+    U0, K = sample_parameters(ParameterRange(eta=eta), n, seed, lattice_nm)
+    return _simulated(U0, K, seed, lattice_nm)
+
+
+def non_pt_set(kind: str, n: int, seed: int) -> dict[str, np.ndarray]:
+    """``n`` lines (n, 512) of one non-PT kind, read at the stated lattice 0.246 nm
+    (``force_nN``), with the truths of the simulated kinds (``U0_eV``, ``K_N_m``, ``eta``
+    and ``F_mean_nN``, the clean line's mean; NaN for the others)."""
+    rng = np.random.default_rng([seed, NON_PT.index(kind)])
+    p = X_NM.size
+    mean = rng.uniform(-1.0, 3.0, (n, 1))
+    f = None
+    if kind == "white_noise":
+        f = mean + _loguniform(rng, 0.01, 2.0, n)[:, None] * rng.standard_normal((n, p))
+    elif kind == "random_walk":
+        step = _loguniform(rng, 0.003, 0.3, n)[:, None]
+        f = mean + np.cumsum(step * rng.standard_normal((n, p)), axis=1)
+    elif kind == "flat":
+        slope = rng.uniform(-0.02, 0.02, (n, 1)) * X_NM[None, :]
+        f = mean + slope + _loguniform(rng, 1e-5, 3e-3, n)[:, None] * rng.standard_normal((n, p))
+    elif kind == "square_wave":
+        period = _loguniform(rng, 0.2, 4.0, n)[:, None]
+        duty = rng.uniform(0.3, 0.7, (n, 1))
+        phase = rng.random((n, 1))
+        amp = _loguniform(rng, 0.1, 3.0, n)[:, None]
+        wave = amp * (((X_NM[None, :] / period + phase) % 1.0) < duty)
+        f = mean + wave + 0.05 * amp * rng.random((n, 1)) * rng.standard_normal((n, p))
+    if f is not None:
+        return {"force_nN": f, **{k: np.full(n, np.nan) for k in TRUTHS}}
+    if kind == "reversed_sawtooth":
+        out = _pt_lines(n, seed, (1.5, 40.0), LATTICE_NM)
+        f = _lab_half(out["force_nN"], rng)
+        f[::2] = f[::2, ::-1]  # reversed in x: slow fall, sudden rise
+        f[1::2] = -f[1::2]  # sign-flipped: the same shape, negative friction
+        return {"force_nN": f, **{k: np.full(n, np.nan) for k in TRUTHS}}
+    if kind == "smooth_sliding":
+        K = rng.uniform(5.0, 80.0, n)
+        U0 = rng.uniform(0.2, 0.95, n) * K / eta_from(1.0, 1.0, LATTICE_NM)
+        out = _simulated(U0, K, seed, LATTICE_NM)
+    elif kind == "lattice_0.6":
+        out = _pt_lines(n, seed, (1.5, 4.6), 0.6 * LATTICE_NM)
+    else:
+        raise ValueError(kind)
+    out["force_nN"] = _lab_half(out["force_nN"], rng)
+    return out
+
+
+TRUTHS = ("U0_eV", "K_N_m", "eta", "F_mean_nN")
+
+
+def _cached(path: Path, make) -> dict[str, np.ndarray]:
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path.with_name(path.name + ".partial"), "wb") as fh:
+            np.savez(fh, **make())
+        os.replace(path.with_name(path.name + ".partial"), path)
+    with np.load(path) as z:
+        return dict(z)
+
+
+def _traces(data: dict[str, np.ndarray], name: str) -> list[Trace]:
+    """Traces at the stated lattice 0.246 nm and 60 nm/s, truths in ``meta``."""
+    out = []
+    for i, row in enumerate(data["force_nN"]):
+        meta = {"lattice_nm": LATTICE_NM, "velocity_nm_per_s": 60.0}
+        meta.update({k: float(data[k][i]) for k in TRUTHS if k in data})
+        out.append(Trace(X_NM.copy(), row.astype(float), f"{name}:{i:04d}", name, meta))
+    return out
+
+
+def non_pt_traces(kind: str, n: int, seed: int, work: Path) -> list[Trace]:
+    """Traces of one non-PT kind (cached under ``work``)."""
+    return _traces(_cached(work / f"{kind}_{n}_{seed}.npz", lambda: non_pt_set(kind, n, seed)),
+                   kind)  # fmt: skip
+
+
+def clean_traces(n: int, seed: int, work: Path) -> list[Trace]:
+    """Clean paper-preset simulations over the training range (cached under ``work``)."""
+    data = _cached(work / f"clean_{n}_{seed}.npz",
+                   lambda: _pt_lines(n, seed, ParameterRange().eta, LATTICE_NM))  # fmt: skip
+    return _traces(data, "clean")
+
+
+def bench_traces(n_per_material: int, seed: int, work: Path) -> list[Trace]:
+    """The lab bench of ``seed`` (cached under ``work``), with its lattices and velocity."""
+    path = bench_if_missing(BenchConfig(n_per_material=n_per_material, seed=seed),
+                            work / f"bench_{n_per_material}_{seed}.h5")  # fmt: skip
+    return dataset_traces(load_dataset(path), name="bench")
+
+
+def all_sets(n: int, seed: int, bench_seed: int, work: Path) -> dict[str, list[Trace]]:
+    """Every set of the module docstring, by name."""
+    sets = {k: non_pt_traces(k, n, seed, work) for k in NON_PT}
+    sets["clean"] = clean_traces(n, seed, work)
+    sets["lab_bench"] = bench_traces(max(n // 3, 1), bench_seed, work)
+    return sets
+
+
+def rates(estimator, sets: dict[str, list[Trace]]) -> dict[str, tuple[float, Counter]]:
+    """Per set: the fraction of rows in domain and the count of each reason given."""
+    out = {}
+    for name, traces in sets.items():
+        table = estimator.predict(traces)
+        flags = np.array([bool(r.get("in_domain")) for r in table.rows])
+        reasons = Counter(str(r.get("domain_reason")) for r in table.rows if not r.get("in_domain"))
+        out[name] = (float(flags.mean()), reasons)
+    return out
+
+
+def print_rates(label: str, res: dict[str, tuple[float, Counter]]) -> None:
+    print(f"\n{label}: fraction of rows in domain (target: non-PT <= 0.25 each and <= 0.10 "
+          "overall, clean >= 0.95, lab bench >= 0.85)")  # fmt: skip
+    for name, (frac, reasons) in res.items():
+        top = "; ".join(f"{r} ({c})" for r, c in reasons.most_common(3))
+        print(f"  {name:<18}{frac:>7.3f}   {top}")
+    non = np.mean([res[k][0] for k in NON_PT if k in res])
+    print(f"  {'non-PT overall':<18}{non:>7.3f}   (out of domain: {1 - non:.3f})")
+
+
+def speed(estimator, n: int, repeats: int, work: Path) -> None:
+    """Time ``estimator.predict`` with and without the verdict, alternately."""
+    base = clean_traces(200, 1, work) + bench_traces(67, BENCH_SEED + 1, work)
+    traces = [base[i % len(base)] for i in range(n)]
+    estimator.predict(traces[:300])
+    best = {True: np.inf, False: np.inf}
+    for _ in range(repeats):
+        for verdict in (False, True):
+            estimator.domain_verdict = verdict
+            t = time.perf_counter()
+            estimator.predict(traces)
+            best[verdict] = min(best[verdict], time.perf_counter() - t)
+    estimator.domain_verdict = True
+    cpu = platform.processor() or platform.machine()
+    print(f"\nLineEstimator.predict, {n} traces of 512 px (clean and lab-bench lines), "
+          f"{torch.get_num_threads()} torch threads, {os.cpu_count()} CPUs ({cpu}), "
+          f"load average {os.getloadavg()[0]:.1f}: best of {repeats}")
+    for verdict in (False, True):
+        print(f"  verdict {'on ' if verdict else 'off'}: {best[verdict]:.2f} s = "
+              f"{n / best[verdict]:,.0f} traces/s")
+    print(f"  throughput with / without the verdict: {best[False] / best[True]:.3f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=2, help="seed of the sets (tuned on 1)")
+    parser.add_argument("--bench-seed", type=int, default=BENCH_SEED)
+    parser.add_argument("--n", type=int, default=200, help="traces per set")
+    parser.add_argument("--n-speed", type=int, default=5000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--work", type=Path, default=ROOT / "build" / "domain")
+    parser.add_argument("--skip-speed", action="store_true")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    from stickslip.estimators.classical.estimator import ClassicalEstimator
+    from stickslip.estimators.load import load_estimator
+
+    sets = all_sets(args.n, args.seed, args.bench_seed, args.work)
+    print(f"sets of seed {args.seed} ({args.n} traces each), lab bench of seed "
+          f"{args.bench_seed} ({len(sets['lab_bench'])} traces)")
+    line = load_estimator(None)
+    print_rates("line model (bundled)", rates(line, sets))
+    print_rates("classical estimator", rates(ClassicalEstimator(), sets))
+    if not args.skip_speed:
+        speed(line, args.n_speed, args.repeats, args.work)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,433 @@
+"""Is a trace in the domain the estimates are valid for? A verdict on every row.
+
+Every estimator's :meth:`~stickslip.estimators.base.TraceEstimator.predict` ends with
+:func:`assess`, which adds three columns to each row:
+
+``in_domain``
+    True when the trace looks like Prandtl-Tomlinson stick-slip that the estimator
+    was built for, False otherwise (and for rows without an estimate).
+``domain_score``
+    The largest of the checks below, each a statistic divided by its limit, so that
+    each check fails above 1: ``domain_score <= 1`` is in domain, 2 is twice as far
+    past the nearest limit. Empty for rows without an estimate.
+``domain_reason``
+    Empty in domain; else the failed checks in plain words, worst first, separated
+    by ``"; "`` (``"no estimate: <quality>"`` for rows without an estimate).
+
+The checks. All but the last read the trace itself (:func:`trace_checks`, a compiled
+kernel: about 20 us per 512-pixel line) and the row's estimate, so they hold for every
+estimator:
+
+1. slips: at least :data:`MIN_SLIPS` sudden drops (a run of pixel differences below
+   ``-max(3 sqrt(2) sigma, 2 median|dF|)`` adding up to at least a quarter of the line's
+   force range and 6 sigma, ``sigma`` the white noise from second differences) --
+   ``"no stick-slip: slips not found"`` (``"flat line: ..."`` when the force does not
+   vary beyond the noise);
+2. direction: sudden rises (the same test upwards) at most :data:`MAX_RISE_FRACTION`
+   of the drops. Stick-slip rises slowly and drops fast; a sawtooth that does the
+   opposite is ``"sawtooth reversed"`` (a retrace read without its sign flip, a trace
+   read backwards), and jumps both ways (a square wave, telegraph noise) are
+   ``"jumps up as well as down"``;
+3. spacing: the lower quartile of the distances between consecutive slips at least
+   :data:`MIN_SPACING` lattice spacings of the stated lattice. Slips are one (single
+   slip) or several (multiple slip) lattice spacings apart; closer ones mean the stated
+   lattice is wrong or the drops are not slips -- ``"slips closer than one lattice
+   spacing"``;
+4. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
+   the estimate's own uncertainty (the window is missed when the whole 95 % interval,
+   else ``eta +- 2 eta_std``, else the value, lies outside it) -- ``"eta below the
+   trained window"`` (smooth sliding, or a barely bistable contact) or ``"... above"``;
+5. for estimators that give one: ``domain_embedding`` (a column of the row), the
+   distance of the line from the estimator's training lines in units of its limit
+   (the whole-line CNN: Mahalanobis distance of its pooled features from those of
+   simulated training-like lines, :class:`EmbeddingReference`) -- ``"line unlike the
+   training lines"``.
+
+Out of domain, the numbers stay, but the intervals are widened (:func:`widen_row`):
+every half-width ``*_lo68/_hi68/_lo95/_hi95`` about the estimate and every ``*_std``
+grows by :data:`WIDEN_FACTOR` (in log space for U0, K and eta, whose intervals are
+log-normal), because the calibration that made them was fitted on lines of the
+domain and says nothing about others. The factor is the one the 95 % intervals needed
+to cover 95 % of the truths of the out-of-domain simulated lines that have a truth
+(smooth sliding and a wrong lattice: ``benchmarks/domain.py`` prints it), rounded up.
+The plain reason says why; ``infer --check`` (the posterior predictive check) stays
+the deeper, slower test of whether the PT model describes a trace at all.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, MutableMapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numba import njit, prange
+
+from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
+
+#: The trained window of eta (the training range of every learned model, PHYSICS.md).
+ETA_WINDOW = (1.2, 40.0)
+MIN_SLIPS = 2
+MAX_RISE_FRACTION = 0.25
+MIN_SPACING = 0.8  # lattice spacings
+WIDEN_FACTOR = 3.0
+MAX_SCORE = 1e3  # domain_score is capped here (an eta of 0 would give infinity)
+#: Checks in the order a tie is reported.
+CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "embedding")
+#: Estimates whose intervals :func:`widen_row` widens: in nN units, and in V units for
+#: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
+WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
+LINEAR_TARGETS = ("F_mean_nN", VOLT_NAMES["F_mean_nN"])  # the others are log-normal
+Z68 = 0.9944578832097535  # two-sided 68 % Gaussian quantile
+
+# fields of the kernel's output
+N_DROPS, N_RISES, SPACING_MEDIAN, SPACING_Q25, NOISE, SPAN = range(6)
+N_FIELDS = 6
+
+
+@njit(cache=True, error_model="numpy")
+def _mad(v: np.ndarray) -> float:
+    med = np.median(v)
+    s = 1.4826 * np.median(np.abs(v - med))
+    if s == 0.0:  # digitised lines: more than half the values equal
+        s = 1.2533 * np.mean(np.abs(v - med))
+    return s
+
+
+@njit(cache=True, error_model="numpy")
+def _events(d: np.ndarray, sign: float, thr: float, min_size: float, pos: np.ndarray) -> int:
+    """Runs of ``sign * d > thr / 2`` that reach ``thr`` and add up to ``min_size``;
+    writes the index of each run's largest step into ``pos``, returns their number."""
+    n = d.size
+    k = 0
+    i = 0
+    while i < n:
+        if not (sign * d[i] > 0.5 * thr):
+            i += 1
+            continue
+        j = i
+        total = sign * d[i]
+        best = i
+        while j + 1 < n and sign * d[j + 1] > 0.5 * thr:
+            j += 1
+            total += sign * d[j]
+            if sign * d[j] > sign * d[best]:
+                best = j
+        if sign * d[best] > thr and total >= min_size:
+            pos[k] = best
+            k += 1
+        i = j + 1
+    return k
+
+
+@njit(cache=True, error_model="numpy")
+def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
+    n = F.size
+    out[:] = np.nan
+    G = F.copy()  # 3-point median: a single-sample spike is not a slip
+    for i in range(1, n - 1):
+        a, b, c = F[i - 1], F[i], F[i + 1]
+        G[i] = max(min(a, b), min(max(a, b), c))
+    sigma = _mad(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
+    xm, Gm = np.mean(x), np.mean(G)
+    sxx = np.sum((x - xm) ** 2)
+    slope = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
+    resid = np.sort(G - slope * (x - xm))
+    span = resid[int(0.98 * (n - 1))] - resid[int(0.02 * (n - 1))]
+    d = G[1:] - G[:-1]
+    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * np.median(np.abs(d)), 1e-12)
+    min_size = max(0.25 * span, 6.0 * sigma, 1e-12)
+    pos = np.empty(d.size, np.int64)
+    nd = _events(d, -1.0, thr, min_size, pos)
+    out[N_DROPS] = nd
+    if nd >= 2:
+        gaps = np.empty(nd - 1)
+        for k in range(nd - 1):
+            gaps[k] = x[pos[k + 1] + 1] - x[pos[k] + 1]
+        out[SPACING_MEDIAN] = np.median(gaps)
+        out[SPACING_Q25] = np.percentile(gaps, 25.0)
+    out[N_RISES] = _events(d, 1.0, thr, min_size, pos)
+    out[NOISE] = sigma
+    out[SPAN] = span
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _check_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    n = offsets.size - 1
+    out = np.empty((n, N_FIELDS))
+    for i in prange(n):
+        lo, hi = offsets[i], offsets[i + 1]
+        _check_one(xs[lo:hi], Fs[lo:hi], out[i])
+    return out
+
+
+@dataclass
+class TraceChecks:
+    """What :func:`trace_checks` reads off each trace (arrays of length N).
+
+    Attributes
+    ----------
+    n_drops, n_rises : ndarray of int
+        Sudden drops (slips) and sudden rises found.
+    spacing_median_nm, spacing_q25_nm : ndarray
+        Median and lower quartile of the distances between consecutive drops (NaN with
+        fewer than two drops).
+    noise_nN : ndarray
+        White-noise standard deviation per sample (from second differences).
+    span_nN : ndarray
+        2-98 % range of the linearly detrended, despiked force.
+    """
+
+    n_drops: np.ndarray
+    n_rises: np.ndarray
+    spacing_median_nm: np.ndarray
+    spacing_q25_nm: np.ndarray
+    noise_nN: np.ndarray
+    span_nN: np.ndarray
+
+
+def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray]) -> TraceChecks:
+    """Slips, rises and slip spacing of each trace (see the module docstring)."""
+    sizes = np.array([np.asarray(f).size for f in force_nN], np.int64)
+    if sizes.size == 0:
+        e = np.empty(0)
+        return TraceChecks(e.astype(int), e.astype(int), e, e, e, e)
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    xs = np.concatenate([np.asarray(x, float) for x in x_nm])
+    Fs = np.concatenate([np.asarray(f, float) for f in force_nN])
+    out = _check_batch(xs, Fs, offsets)
+    return TraceChecks(out[:, N_DROPS].astype(int), out[:, N_RISES].astype(int),
+                       out[:, SPACING_MEDIAN], out[:, SPACING_Q25], out[:, NOISE],
+                       out[:, SPAN])  # fmt: skip
+
+
+def _number(row: Mapping[str, Any], key: str) -> float:
+    v = row.get(key)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        return float("nan")
+    return float("nan") if is_missing(v) else float(v)
+
+
+def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
+    """The range of eta a row's estimate allows: its 95 % interval, else
+    ``eta +- 2 eta_std`` (an ``eta_std`` may be a spread over slips or windows), else the
+    value itself."""
+    eta = _number(row, "eta")
+    lo, hi = _number(row, "eta_lo95"), _number(row, "eta_hi95")
+    if np.isfinite(lo) and np.isfinite(hi):
+        return lo, hi
+    sd = _number(row, "eta_std")
+    if np.isfinite(sd):
+        return eta - 2.0 * sd, eta + 2.0 * sd
+    return eta, eta
+
+
+def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[str, Any]
+                 ) -> dict[str, float]:  # fmt: skip
+    """Each check of trace ``i`` (:data:`CHECKS`) as statistic / limit: fails above 1.
+    A check that cannot be made (no eta, fewer than two slips for the spacing) is left
+    out."""
+    nd, nr = int(checks.n_drops[i]), int(checks.n_rises[i])
+    out = {"slips": MIN_SLIPS / max(nd, 0.5)}
+    if nr > 0:
+        out["direction"] = nr / max(nd, 0.5) / MAX_RISE_FRACTION
+    q25 = checks.spacing_q25_nm[i]
+    if np.isfinite(q25) and q25 > 0 and lattice_nm > 0:
+        out["spacing"] = MIN_SPACING * lattice_nm / q25
+    lo, hi = eta_bounds(row)
+    if np.isfinite(hi):
+        out["eta_low"] = ETA_WINDOW[0] / hi if hi > 0 else np.inf
+    if np.isfinite(lo):
+        out["eta_high"] = lo / ETA_WINDOW[1]
+    emb = _number(row, "domain_embedding")
+    if np.isfinite(emb):
+        out["embedding"] = emb
+    return out
+
+
+def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
+           row: Mapping[str, Any]) -> str:  # fmt: skip
+    """The plain reason a check of trace ``i`` failed."""
+    nd, nr = int(checks.n_drops[i]), int(checks.n_rises[i])
+    if check == "slips":
+        text = ("no stick-slip: slips not found" if nd == 0 else
+                f"no stick-slip: {nd} slip found, at least {MIN_SLIPS} needed")  # fmt: skip
+        if checks.span_nN[i] < 10.0 * checks.noise_nN[i] + 1e-9:
+            text += " (the force does not vary beyond its noise)"
+        return text
+    if check == "direction":
+        if nr >= 2 * max(nd, 1):
+            return "sawtooth reversed: sudden rises and slow falls"
+        return "jumps up as well as down: not a stick-slip sawtooth"
+    if check == "spacing":
+        med = checks.spacing_median_nm[i] / lattice_nm
+        return (f"slips closer than one lattice spacing (median {med:.2f} a, stated "
+                f"a = {lattice_nm:g} nm)")  # fmt: skip
+    eta = _number(row, "eta")
+    if check == "eta_low":
+        return f"eta below the trained window ({eta:.3g} < {ETA_WINDOW[0]:g})"
+    if check == "eta_high":
+        return f"eta above the trained window ({eta:.3g} > {ETA_WINDOW[1]:g})"
+    emb = _number(row, "domain_embedding")
+    return f"line unlike the training lines (embedding distance {emb:.2g}x the limit)"
+
+
+def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> None:
+    """Widen a row's intervals and stds about its estimates by ``factor`` (in place).
+
+    ``F_mean_nN`` (or ``F_mean_V``): every bound moves ``factor`` times as far from the
+    estimate, and the std grows by ``factor``. ``U0_eV, K_N_m, eta`` (and their volt
+    versions; log-normal intervals): the same in log space, ``lo -> m (lo / m) ** factor``;
+    the std is then that of the log-normal with the widened 68 % interval, as the line
+    model defines it (without a 68 % interval, the std grows by ``factor``).
+    """
+    for k in WIDENED:
+        m = _number(row, k)
+        if not np.isfinite(m):
+            continue
+        log = k not in LINEAR_TARGETS and m > 0
+        for b in BOUNDS:
+            v = _number(row, f"{k}_{b}")
+            if not np.isfinite(v):
+                continue
+            if log and v > 0:
+                row[f"{k}_{b}"] = m * (v / m) ** factor
+            elif not log:
+                row[f"{k}_{b}"] = m + factor * (v - m)
+        sd = _number(row, f"{k}_std")
+        if not np.isfinite(sd):
+            continue
+        lo, hi = _number(row, f"{k}_lo68"), _number(row, f"{k}_hi68")
+        if log and np.isfinite(lo) and np.isfinite(hi) and lo > 0:
+            e = np.log(hi / lo) / (2.0 * Z68)
+            row[f"{k}_std"] = float(m * np.sqrt(np.expm1(e**2) * np.exp(e**2)))
+        else:
+            row[f"{k}_std"] = factor * sd
+
+
+def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
+           force_nN: Sequence[np.ndarray], lattice_nm: Sequence[float],
+           widen: bool = True) -> None:  # fmt: skip
+    """Add ``in_domain``, ``domain_score``, ``domain_reason`` to every row (in place) and,
+    with ``widen``, widen the intervals of the rows out of domain (:func:`widen_row`).
+
+    ``rows[i]`` is the row of the trace ``(x_nm[i], force_nN[i])`` read at lattice
+    ``lattice_nm[i]``; rows without an estimate (``quality`` other than ``ok``) are out
+    of domain with the reason ``"no estimate: <quality>"``.
+    """
+    todo = [i for i, r in enumerate(rows) if r.get("quality") == OK]
+    checks = trace_checks([x_nm[i] for i in todo], [force_nN[i] for i in todo])
+    for r in rows:
+        if r.get("quality") != OK:
+            r.update(in_domain=False, domain_score=None,
+                     domain_reason=f"no estimate: {r.get('quality')}")  # fmt: skip
+    for j, i in enumerate(todo):
+        row, a = rows[i], float(lattice_nm[i])
+        ratios = check_ratios(checks, j, a, row)
+        failed = sorted((k for k, v in ratios.items() if v > 1.0),
+                        key=lambda k: (-ratios[k], CHECKS.index(k)))  # fmt: skip
+        row["in_domain"] = not failed
+        row["domain_score"] = float(min(max(ratios.values()), MAX_SCORE))
+        row["domain_reason"] = "; ".join(reason(k, checks, j, a, row) for k in failed) or None
+        if failed and widen:
+            widen_row(row)
+
+
+@dataclass
+class EmbeddingReference:
+    """Where a learned model's pooled features lie on its training-like lines.
+
+    A Mahalanobis distance from the reference lines' features, in their principal
+    components: ``d^2 = sum_j p_j^2 / var_j + r^2 / var_res``, ``p = components @ (f -
+    mean)`` and ``r`` the norm of what the components do not span. The variances are
+    shrunk towards their mean (``var_j = lambda_j + s mean(lambda)``, ``var_res = s
+    mean(lambda)``) so that directions in which the reference lines hardly vary count
+    without dominating. The distance reported is ``sqrt(d^2 / D)`` (``D`` features; about
+    1 for a typical reference line), averaged over an ensemble's members, and divided
+    by ``limit``: its ``level`` quantile over the reference lines, so that about ``1 -
+    level`` of lines like them fall beyond 1.
+
+    Attributes
+    ----------
+    mean : ndarray (M, D)
+        Per member: the reference features' mean.
+    components : ndarray (M, k, D)
+        Principal directions (k <= D).
+    variance : ndarray (M, k)
+        Shrunk variance along each.
+    residual_variance : ndarray (M,)
+        Variance assumed outside the components.
+    limit : float
+        Unscaled distance at the ``level`` quantile of the reference lines.
+    level : float
+    fingerprint : str
+        Identifies the model the features come from (its weights): a reference made
+        for another model is not used.
+    """
+
+    mean: np.ndarray
+    components: np.ndarray
+    variance: np.ndarray
+    residual_variance: np.ndarray
+    limit: float
+    level: float
+    fingerprint: str
+
+    @classmethod
+    def fit(cls, features: np.ndarray, fingerprint: str, shrinkage: float = 0.01,
+            level: float = 0.995) -> EmbeddingReference:  # fmt: skip
+        """From the features (M, N, D) of N reference lines for each of M members."""
+        feats = np.asarray(features, float)
+        M, N, D = feats.shape
+        k = min(N - 1, D)
+        mean = feats.mean(axis=1)
+        comps = np.empty((M, k, D))
+        var = np.empty((M, k))
+        res = np.empty(M)
+        for m in range(M):
+            X = feats[m] - mean[m]
+            _, s, vt = np.linalg.svd(X, full_matrices=False)
+            lam = s[:k] ** 2 / (N - 1)
+            floor = shrinkage * max(float(lam.sum()) / D, 1e-30)
+            comps[m], var[m], res[m] = vt[:k], lam + floor, floor
+        ref = cls(mean, comps, var, res, 1.0, level, fingerprint)
+        ref.limit = float(np.quantile(ref.raw_distance(feats), level))
+        return ref
+
+    def raw_distance(self, features: np.ndarray) -> np.ndarray:
+        """Distance (mean over members) of N lines' features (M, N, D), not scaled."""
+        feats = np.asarray(features, float)
+        d2 = np.zeros(feats.shape[:2])
+        for m in range(feats.shape[0]):  # one member at a time: (N, D) @ (D, k)
+            X = feats[m] - self.mean[m]
+            P = X @ self.components[m].T
+            rest = np.einsum("nd,nd->n", X, X) - np.einsum("nk,nk->n", P, P)
+            d2[m] = (P**2 / self.variance[m]).sum(axis=1) + np.maximum(rest, 0.0) \
+                / self.residual_variance[m]
+        return np.sqrt(d2 / feats.shape[-1]).mean(axis=0)
+
+    def distance(self, features: np.ndarray) -> np.ndarray:
+        """Distance of N lines in units of :attr:`limit` (above 1: out of domain)."""
+        return self.raw_distance(features) / self.limit
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write as a compressed ``.npz`` (float32 arrays)."""
+        path = Path(path)
+        np.savez_compressed(
+            path, mean=self.mean.astype(np.float32),
+            components=self.components.astype(np.float32),
+            variance=self.variance.astype(np.float32),
+            residual_variance=self.residual_variance.astype(np.float32),
+            limit=np.float64(self.limit), level=np.float64(self.level),
+            fingerprint=np.str_(self.fingerprint),
+        )  # fmt: skip
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> EmbeddingReference:
+        with np.load(path) as z:
+            return cls(z["mean"].astype(float), z["components"].astype(float),
+                       z["variance"].astype(float), z["residual_variance"].astype(float),
+                       float(z["limit"]), float(z["level"]), str(z["fingerprint"]))  # fmt: skip

@@ -1,0 +1,117 @@
+"""Trace/retrace pairs: the friction of a scan line from both directions.
+
+A friction map gives each scan line twice, as a trace and a retrace
+(:mod:`stickslip.traces.formats.maps`). The readers store the retrace reversed in x
+and sign-flipped, so that both rows read as friction in their own scan direction. With
+``F`` the friction (it reverses with the scan direction) and ``o`` an additive offset
+of the lateral signal that does not (detector offset, topography crosstalk), the raw
+signals are ``+F + o`` forward and ``-F + o`` backward; after the reader's sign flip
+the two rows carry
+
+    trace:   F_mean = <F> + <o>          retrace: F_mean = <F> - <o>
+
+so that
+
+    friction_pair_nN = (F_trace + F_retrace) / 2     (the offset cancels)
+    offset_pair_nN   = (F_trace - F_retrace) / 2     (the offset, friction cancels)
+
+where ``F_trace``, ``F_retrace`` are the two rows' ``F_mean_nN`` estimates. This is the
+friction loop's ``(trace - retrace) / 2`` of the raw images, with each row's estimate in
+place of the raw mean. Both rows keep their own ``F_mean_nN`` and get the pair's
+columns.
+
+Uncertainty. The pair's ``friction_pair_nN_std`` and its 68 / 95 % intervals are the
+means of the two rows' (``(std_t + std_r) / 2``, ``(lo_t + lo_r) / 2``, ...): the
+interval of the mean of two fully correlated errors. Independent errors would give
+intervals ~1/sqrt(2) as wide; but the rows share the line, the substrate, the model and
+its systematic errors, so independence would claim a precision the pair does not have.
+Where the rows' errors are dominated by the offset, which enters them with opposite
+signs, the pair is better than this bound says; it is never worse for Gaussian errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping, MutableMapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from stickslip.estimators.table import BOUNDS, is_missing
+from stickslip.traces.formats.common import RETRACE, TRACE
+from stickslip.traces.trace import Trace
+
+FRICTION = "F_mean_nN"
+PAIR = "friction_pair_nN"
+OFFSET = "offset_pair_nN"
+PAIR_COLUMNS = (PAIR, f"{PAIR}_std", *(f"{PAIR}_{b}" for b in BOUNDS), OFFSET, "pair_trace")
+#: Rows of traces in volts (no calibration) carry their friction as ``F_mean_V``: their
+#: pair's columns are ``friction_pair_V ...``, ``offset_pair_V``.
+UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
+
+
+def pair_key(trace: Trace) -> tuple[Hashable, ...] | None:
+    """The scan line a trace belongs to, ``(source, channel, load, line)``, or None for a
+    trace that is not one direction of a map line."""
+    meta = trace.meta or {}
+    if meta.get("direction") not in (TRACE, RETRACE) or is_missing(meta.get("line")):
+        return None
+    return (trace.source, meta.get("channel"), meta.get("load"), meta.get("line"))
+
+
+def find_pairs(traces: Sequence[Trace | None]) -> list[tuple[int, int]]:
+    """Index pairs ``(trace, retrace)`` of the same scan line, in input order.
+
+    A line with one direction only, or with a direction given more than once (the same
+    file read twice), is not paired: which two rows belong together would be a guess.
+    """
+    slots: dict[tuple[Hashable, ...], dict[str, list[int]]] = {}
+    for i, t in enumerate(traces):
+        key = None if t is None else pair_key(t)
+        if key is not None:
+            slots.setdefault(key, {TRACE: [], RETRACE: []})[t.meta["direction"]].append(i)
+    return sorted((s[TRACE][0], s[RETRACE][0]) for s in slots.values()
+                  if len(s[TRACE]) == 1 and len(s[RETRACE]) == 1)  # fmt: skip
+
+
+def _value(row: Mapping[str, Any], key: str) -> float:
+    v = row.get(key)
+    if isinstance(v, (int, float, np.integer, np.floating)) and not is_missing(v):
+        return float(v)
+    return float("nan")
+
+
+def pair_friction(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
+                  ) -> dict[str, float]:  # fmt: skip
+    """The pair's columns from the two rows (see the module docstring); empty when either
+    row has no friction estimate (or the two are in different units). Intervals only
+    where both rows have them."""
+    both = [k for k in UNITS if np.isfinite(_value(trace_row, k))
+            and np.isfinite(_value(retrace_row, k))]  # fmt: skip
+    if not both:
+        return {}
+    friction, unit = both[0], UNITS[both[0]]
+    ft, fr = _value(trace_row, friction), _value(retrace_row, friction)
+    pair, offset = f"friction_pair_{unit}", f"offset_pair_{unit}"
+    out = {pair: 0.5 * (ft + fr), offset: 0.5 * (ft - fr)}
+    for suffix in ("std", *BOUNDS):
+        key = f"{friction}_{suffix}"
+        vt, vr = _value(trace_row, key), _value(retrace_row, key)
+        if np.isfinite(vt) and np.isfinite(vr):
+            out[f"{pair}_{suffix}"] = 0.5 * (vt + vr)
+    return out
+
+
+def add_pair_columns(rows: Sequence[MutableMapping[str, Any]],
+                     traces: Sequence[Trace | None]) -> int:  # fmt: skip
+    """Put the pair's columns on both rows of every trace/retrace pair; returns the
+    number of pairs. ``rows[i]`` is the row of ``traces[i]`` (None: no trace)."""
+    n = 0
+    for it, ir in find_pairs(traces[: len(rows)]):
+        cols = pair_friction(rows[it], rows[ir])
+        if not cols:
+            continue
+        for i, other in ((it, ir), (ir, it)):
+            rows[i].update(cols)
+            rows[i]["pair_trace"] = rows[other].get("trace")
+        n += 1
+    return n

@@ -1,0 +1,211 @@
+"""The in/out-of-domain verdict: trace checks, reasons, widened intervals, embeddings."""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+
+import numpy as np
+import pytest
+
+from stickslip.estimators import domain as D
+from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.domain import EmbeddingReference, assess, trace_checks, widen_row
+from stickslip.traces.readers import collect_traces
+from stickslip.traces.trace import Trace
+
+A = 0.246
+X = np.arange(512) * (11.0 / 512)
+RNG = np.random.default_rng(11)
+
+
+def sawtooth(period_nm: float = A, noise_nN: float = 0.01, reverse: bool = False) -> np.ndarray:
+    """Stick-slip-like: rises over a period, drops within a pixel (or the reverse)."""
+    phase = (X / period_nm + 0.3) % 1.0
+    f = 2.0 * phase - 1.0 + 0.5
+    f = f[::-1] if reverse else f
+    return f + noise_nN * RNG.standard_normal(X.size)
+
+
+def square_wave() -> np.ndarray:
+    return 1.0 * ((X / 1.3) % 1.0 < 0.5) + 0.01 * RNG.standard_normal(X.size)
+
+
+def row(eta: float = 5.0, lo: float | None = 4.0, hi: float | None = 6.0) -> dict:
+    r = {"quality": "ok", "F_mean_nN": 1.0, "U0_eV": 1.0, "K_N_m": 10.0, "eta": eta}
+    if lo is not None:
+        r.update(eta_lo95=lo, eta_hi95=hi)
+    return r
+
+
+def judge(force: np.ndarray, r: dict | None = None, lattice_nm: float = A) -> dict:
+    r = row() if r is None else r
+    assess([r], [X], [force], [lattice_nm])
+    return r
+
+
+def test_trace_checks_count_slips_rises_and_their_spacing():
+    c = trace_checks([X] * 5, [sawtooth(), sawtooth(reverse=True), square_wave(),
+                               0.3 * RNG.standard_normal(X.size), np.full(X.size, 2.0)])
+    n_periods = 11.0 / A
+    assert c.n_drops[0] == pytest.approx(n_periods, abs=1.5)
+    assert c.n_rises[0] == 0
+    assert c.spacing_median_nm[0] == pytest.approx(A, rel=0.05)
+    assert c.n_rises[1] == pytest.approx(n_periods, abs=1.5) and c.n_drops[1] == 0
+    assert c.n_drops[2] == c.n_rises[2] == pytest.approx(11.0 / 1.3, abs=1.5)
+    assert c.n_drops[3] == c.n_rises[3] == 0  # white noise: no jump stands out
+    assert c.n_drops[4] == c.n_rises[4] == 0  # flat
+    assert np.isnan(c.spacing_median_nm[3])
+
+
+@pytest.mark.parametrize(("force", "reason"), [
+    (lambda: sawtooth(reverse=True), "sawtooth reversed"),
+    (square_wave, "jumps up as well as down"),
+    (lambda: 0.3 * RNG.standard_normal(X.size), "no stick-slip: slips not found"),
+    (lambda: np.cumsum(0.05 * RNG.standard_normal(X.size)), "no stick-slip"),
+    (lambda: np.full(X.size, 1.5), "the force does not vary beyond its noise"),
+    (lambda: sawtooth(period_nm=0.6 * A), "slips closer than one lattice spacing"),
+])  # fmt: skip
+def test_non_stick_slip_traces_are_out_of_domain_with_a_plain_reason(force, reason):
+    r = judge(force())
+    assert r["in_domain"] is False
+    assert r["domain_score"] > 1.0
+    assert reason in r["domain_reason"]
+
+
+def test_a_stick_slip_trace_with_eta_in_the_window_is_in_domain():
+    r = judge(sawtooth())
+    assert r["in_domain"] is True
+    assert 0.0 < r["domain_score"] <= 1.0
+    assert r["domain_reason"] is None
+    # two lattice spacings apart (multiple slip) is stick-slip too
+    assert judge(sawtooth(period_nm=2 * A))["in_domain"] is True
+
+
+def test_eta_outside_the_trained_window_is_judged_on_the_estimates_interval():
+    low = judge(sawtooth(), row(eta=0.8, lo=0.7, hi=0.95))
+    assert low["in_domain"] is False
+    assert low["domain_reason"].startswith("eta below the trained window")
+    assert low["domain_score"] == pytest.approx(D.ETA_WINDOW[0] / 0.95)
+    # an interval that reaches into the window keeps the row in domain
+    assert judge(sawtooth(), row(eta=1.1, lo=0.9, hi=1.4))["in_domain"] is True
+    # without an interval: eta +- 2 std, else the value
+    no_iv = row(eta=1.0, lo=None)
+    assert judge(sawtooth(), {**no_iv, "eta_std": 0.05})["in_domain"] is False
+    assert judge(sawtooth(), {**no_iv, "eta_std": 0.2})["in_domain"] is True
+    assert judge(sawtooth(), no_iv)["in_domain"] is False
+    high = judge(sawtooth(), row(eta=80.0, lo=60.0, hi=100.0))
+    assert high["domain_reason"].startswith("eta above the trained window")
+
+
+def test_the_embedding_distance_counts_when_a_row_has_one():
+    r = judge(sawtooth(), {**row(), "domain_embedding": 2.5})
+    assert r["in_domain"] is False
+    assert r["domain_score"] == pytest.approx(2.5)
+    assert "unlike the training lines" in r["domain_reason"]
+    assert judge(sawtooth(), {**row(), "domain_embedding": 0.7})["in_domain"] is True
+
+
+def test_failed_checks_are_listed_worst_first():
+    r = judge(sawtooth(reverse=True), {**row(eta=0.5, lo=0.4, hi=0.6), "domain_embedding": 900.0})
+    reasons = r["domain_reason"].split("; ")
+    assert reasons[0].startswith("line unlike the training lines")
+    assert any(s.startswith("sawtooth reversed") for s in reasons)
+    assert any(s.startswith("eta below") for s in reasons)
+
+
+def test_rows_without_an_estimate_are_out_of_domain():
+    r = {"quality": "too few slips"}
+    assess([r], [X], [sawtooth()], [A])
+    assert r["in_domain"] is False
+    assert r["domain_score"] is None
+    assert r["domain_reason"] == "no estimate: too few slips"
+
+
+def lognormal_row(m: float, e: float) -> dict:
+    z68, z95 = D.Z68, 1.959963984540054
+    return {"eta": m, "eta_lo68": m * np.exp(-z68 * e), "eta_hi68": m * np.exp(z68 * e),
+            "eta_lo95": m * np.exp(-z95 * e), "eta_hi95": m * np.exp(z95 * e),
+            "eta_std": m * np.sqrt(np.expm1(e**2) * np.exp(e**2))}  # fmt: skip
+
+
+def test_widening_scales_half_widths_linearly_for_friction_and_in_log_space_for_the_rest():
+    r = {"F_mean_nN": 1.0, "F_mean_nN_lo95": 0.8, "F_mean_nN_hi95": 1.3, "F_mean_nN_std": 0.1,
+         **lognormal_row(5.0, 0.1)}  # fmt: skip
+    widen_row(r, 3.0)
+    assert (r["F_mean_nN_lo95"], r["F_mean_nN_hi95"]) == pytest.approx((0.4, 1.9))
+    assert r["F_mean_nN_std"] == pytest.approx(0.3)
+    wide = lognormal_row(5.0, 0.3)  # the log-normal of three times the log-width
+    for k in ("eta_lo68", "eta_hi68", "eta_lo95", "eta_hi95", "eta_std"):
+        assert r[k] == pytest.approx(wide[k], rel=1e-9)
+
+
+def test_only_rows_out_of_domain_are_widened():
+    inside = {**row(), "eta_lo95": 4.0, "eta_hi95": 6.0}
+    outside = dict(inside)
+    assess([inside, outside], [X, X], [sawtooth(), sawtooth(reverse=True)], [A, A])
+    assert (inside["eta_lo95"], inside["eta_hi95"]) == (4.0, 6.0)
+    assert outside["eta_lo95"] == pytest.approx(5.0 * (4.0 / 5.0) ** D.WIDEN_FACTOR)
+    assert outside["eta_hi95"] == pytest.approx(5.0 * (6.0 / 5.0) ** D.WIDEN_FACTOR)
+    assert outside["eta"] == 5.0  # the estimate itself stays
+
+
+def test_embedding_reference_flags_lines_far_from_its_reference(tmp_path):
+    rng = np.random.default_rng(0)
+    scales = np.linspace(3.0, 0.1, 40)
+    ref_feats = rng.standard_normal((2, 4000, 40)) * scales
+    ref = EmbeddingReference.fit(ref_feats, "abc", level=0.99)
+    new = rng.standard_normal((2, 2000, 40)) * scales
+    assert np.mean(ref.distance(new) > 1.0) == pytest.approx(0.01, abs=0.01)
+    # off in a direction of small variance: far, though small in absolute terms
+    off = new.copy()
+    off[..., -1] += 1.0
+    assert np.mean(ref.distance(off) > 1.0) > 0.9
+    path = ref.save(tmp_path / "ref.npz")
+    back = EmbeddingReference.load(path)
+    assert back.fingerprint == "abc"
+    assert np.allclose(back.distance(new[:, :50]), ref.distance(new[:, :50]), rtol=1e-5)
+
+
+def examples() -> list[Trace]:
+    folder = resources.files("stickslip") / "resources" / "examples"
+    manifest = {m["file"]: m for m in json.loads((folder / "manifest.json").read_text())}
+    traces, errors = collect_traces([str(folder / f) for f in sorted(manifest)])
+    assert not errors
+    for t in traces:
+        t.meta.update(lattice_nm=manifest[t.name + ".csv"]["lattice_nm"],
+                      velocity_nm_per_s=manifest[t.name + ".csv"]["velocity_nm_per_s"])
+    return traces
+
+
+def reversed_copies(traces: list[Trace]) -> list[Trace]:
+    return [Trace(t.x_nm, t.force_nN[::-1].copy(), t.name + "-reversed", t.source, dict(t.meta))
+            for t in traces]  # fmt: skip
+
+
+def test_every_estimator_gives_the_verdict_the_classical_one_too():
+    traces = examples()
+    table = ClassicalEstimator().predict(traces + reversed_copies(traces))
+    n = len(traces)
+    assert all(r["in_domain"] for r in table.rows[:n])
+    assert not any(r["in_domain"] for r in table.rows[n:])
+    est = ClassicalEstimator()
+    est.domain_verdict = False
+    assert "in_domain" not in est.predict(traces).rows[0]
+
+
+def test_the_line_model_keeps_example_traces_in_domain_and_reversed_ones_out():
+    from stickslip.estimators.load import load_estimator
+
+    line = load_estimator(None)
+    assert line.embedding_reference is not None, "bundled reference missing or stale"
+    traces = examples()
+    table = line.predict(traces + reversed_copies(traces))
+    n = len(traces)
+    for r in table.rows[:n]:
+        assert r["in_domain"], (r["trace"], r["domain_reason"])
+        assert 0.0 < r["domain_embedding"] <= 1.0
+    for r in table.rows[n:]:
+        assert not r["in_domain"]
+        assert "sawtooth reversed" in r["domain_reason"]
+        assert r["domain_embedding"] > 1.0

@@ -1,0 +1,128 @@
+"""Trace/retrace pairs: the offset that does not reverse with the scan cancels."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stickslip.estimators.pairs import (
+    OFFSET,
+    PAIR,
+    add_pair_columns,
+    find_pairs,
+    pair_friction,
+)
+from stickslip.traces.formats.common import Channel, ScanFile
+from stickslip.traces.formats.maps import friction_loop, map_to_traces
+from stickslip.traces.trace import Trace
+
+PIXELS = 256
+SIZE_NM = 5.5
+OFFSET_NN = 0.7
+
+
+def sawtooth(x_nm: np.ndarray, lattice_nm: float, peak_nN: float, phase: float) -> np.ndarray:
+    """A stick-slip-like line in its scan direction: slow rise, sudden drop."""
+    return peak_nN * (2.0 * (((x_nm / lattice_nm) + phase) % 1.0) - 1.0) + 0.4 * peak_nN
+
+
+def synthetic_map(lines: int = 3) -> tuple[ScanFile, np.ndarray]:
+    """A friction map with a known lateral offset; returns it and each line's true
+    friction (mean over both directions)."""
+    x = np.arange(PIXELS) * SIZE_NM / PIXELS
+    rng = np.random.default_rng(3)
+    fwd = np.stack([sawtooth(x, 0.246, 1.0 + 0.2 * i, rng.random()) for i in range(lines)])
+    bwd = np.stack([sawtooth(x, 0.246, 1.1 + 0.2 * i, rng.random()) for i in range(lines)])
+    # raw lateral signal: friction + offset forward, -friction + offset backward; the
+    # backward line is stored with columns in increasing x, as every vendor does
+    trace_img = fwd + OFFSET_NN
+    retrace_img = (-bwd + OFFSET_NN)[:, ::-1]
+    scan = ScanFile(
+        path=Path("map.spm"), fmt="test", scan_size_nm=SIZE_NM,
+        channels=[Channel("Friction", "trace", "nN", trace_img.shape, trace_img),
+                  Channel("Friction", "retrace", "nN", retrace_img.shape, retrace_img)],
+    )  # fmt: skip
+    return scan, 0.5 * (fwd.mean(axis=1) + bwd.mean(axis=1))
+
+
+def mean_rows(traces: list[Trace], half_width_nN: float = 0.1) -> list[dict]:
+    """Rows of an estimator that reads each line's friction as its mean force."""
+    rows = []
+    for t in traces:
+        m = float(np.mean(t.force_nN))
+        rows.append({"trace": t.name, "F_mean_nN": m, "F_mean_nN_std": half_width_nN,
+                     "F_mean_nN_lo68": m - half_width_nN, "F_mean_nN_hi68": m + half_width_nN,
+                     "F_mean_nN_lo95": m - 2 * half_width_nN,
+                     "F_mean_nN_hi95": m + 2 * half_width_nN})  # fmt: skip
+    return rows
+
+
+def test_the_offset_cancels_in_the_pair_and_not_in_the_rows():
+    scan, friction = synthetic_map()
+    traces = map_to_traces(scan)
+    rows = mean_rows(traces)
+    assert add_pair_columns(rows, traces) == 3
+    for t, row in zip(traces, rows, strict=True):
+        line = t.meta["line"]
+        sign = 1.0 if t.meta["direction"] == "trace" else -1.0
+        # each row alone is off by the offset, with the sign of its direction ...
+        assert row["F_mean_nN"] - friction[line] == pytest.approx(sign * OFFSET_NN, abs=0.15)
+        # ... the pair is not, and it finds the offset (to the difference between the
+        # two directions' friction, which it cannot tell from an offset)
+        assert row[PAIR] == pytest.approx(friction[line], abs=1e-9)
+        assert row[OFFSET] == pytest.approx(OFFSET_NN, abs=0.05)
+        assert row["pair_trace"] != row["trace"]
+
+
+def test_the_pair_is_the_friction_loop_of_the_raw_images():
+    scan, _ = synthetic_map()
+    traces = map_to_traces(scan)
+    rows = mean_rows(traces)
+    add_pair_columns(rows, traces)
+    loop, offset = friction_loop(scan.channels[0].data, scan.channels[1].data)
+    for t, row in zip(traces, rows, strict=True):
+        assert row[PAIR] == pytest.approx(loop[t.meta["line"]], abs=1e-12)
+        assert row[OFFSET] == pytest.approx(offset[t.meta["line"]], abs=1e-12)
+
+
+def test_pair_interval_is_the_mean_of_the_rows_intervals():
+    t = {"F_mean_nN": 1.0, "F_mean_nN_std": 0.1, "F_mean_nN_lo95": 0.8, "F_mean_nN_hi95": 1.2}
+    r = {"F_mean_nN": 2.0, "F_mean_nN_std": 0.3, "F_mean_nN_lo95": 1.4, "F_mean_nN_hi95": 2.6}
+    p = pair_friction(t, r)
+    assert p[PAIR] == pytest.approx(1.5)
+    assert p[OFFSET] == pytest.approx(-0.5)
+    assert p[f"{PAIR}_std"] == pytest.approx(0.2)
+    assert (p[f"{PAIR}_lo95"], p[f"{PAIR}_hi95"]) == pytest.approx((1.1, 1.9))
+    assert f"{PAIR}_lo68" not in p  # neither row has it
+    assert pair_friction(t, {"F_mean_nN": None}) == {}
+
+
+def test_only_one_trace_and_one_retrace_of_a_line_pair():
+    scan, _ = synthetic_map(lines=2)
+    traces = map_to_traces(scan)
+    pairs = find_pairs(traces)
+    assert len(pairs) == 2
+    for i, j in pairs:
+        assert traces[i].meta["direction"] == "trace"
+        assert traces[j].meta["direction"] == "retrace"
+        assert traces[i].meta["line"] == traces[j].meta["line"]
+    # the same file read twice: which rows belong together is a guess, so none pair
+    assert find_pairs(traces + traces) == []
+    # a line with one direction, a plain trace, and a missing trace do not pair
+    plain = Trace(np.arange(32.0), np.zeros(32), "plain")
+    assert find_pairs([traces[0], plain, None]) == []
+    # another channel of the same file is another pair
+    other = [Trace(t.x_nm, t.force_nN, t.name, t.source, {**t.meta, "channel": "Lateral"})
+             for t in traces]  # fmt: skip
+    assert len(find_pairs(traces + other)) == 4
+
+
+def test_rows_without_a_friction_estimate_get_no_pair_columns():
+    scan, _ = synthetic_map(lines=1)
+    traces = map_to_traces(scan)
+    rows = mean_rows(traces)
+    rows[1] = {"trace": traces[1].name, "quality": "too few slips"}
+    assert add_pair_columns(rows, traces) == 0
+    assert PAIR not in rows[0] and PAIR not in rows[1]
