@@ -164,6 +164,91 @@ def bench_traces(n_per_material: int, seed: int, work: Path) -> list[Trace]:
     return dataset_traces(load_dataset(path), name="bench")
 
 
+# -- the line model's embedding reference (--write-reference) --------------------------
+#: Training-like simulations behind the reference: the line model's randomised training
+#: distribution, its typical laboratory substrate, and paper-preset lines, each on
+#: seeds of their own (training used 101, 104 and 0).
+REFERENCE_SEEDS = {"randomised": 7001, "lab": 7002, "paper": 7003, "effects": 7004}
+REFERENCE_SIZES = {"randomised": 600, "lab": 300, "paper": 240}
+EFFECT_DRAWS = 3  # draws of the detector effects per trajectory
+CLEAN_FRACTION = 0.2  # of each draw, left without detector effects (as in training)
+HOLD_OUT = 0.2  # of the reference trajectories: set the limit, not the moments
+
+
+def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
+    """Training-like lines (simulations cached under ``work``) and the trajectory each
+    comes from. Every trajectory gives :data:`EFFECT_DRAWS` lines with the training
+    prior's detector effects (:func:`~stickslip.estimators.line.training.training_effects`,
+    a :data:`CLEAN_FRACTION` left clean), and those on a flat substrate one pristine line
+    more, as training's pristine lines."""
+    from stickslip.estimators.line.training import TYPICAL_FRACTION, training_effects
+    from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
+
+    n, seed = REFERENCE_SIZES, REFERENCE_SEEDS
+    configs = [RandomisedConfig(n=n["randomised"], seed=seed["randomised"]),
+               lab_config(n["lab"], seed["lab"])]  # fmt: skip
+    parts = []
+    for config in configs:
+        data = cached_randomised_set(config, work, progress=False)
+        p = data.params
+        flat = (np.asarray(p["mod_amplitude"]) == 0) & (np.asarray(p["defect_count"]) == 0)
+        parts.append((np.asarray(data.x_nm, float), np.asarray(data.force_nN, float),
+                      np.asarray(p["lattice_nm"], float),
+                      np.asarray(p["velocity_nm_per_s"], float), flat))  # fmt: skip
+    n_p, seed_p = REFERENCE_SIZES["paper"], REFERENCE_SEEDS["paper"]
+    paper = _cached(work / f"paper_{n_p}_{seed_p}.npz",
+                    lambda: _pt_lines(n_p, seed_p, ParameterRange().eta, LATTICE_NM))  # fmt: skip
+    parts.append((X_NM, paper["force_nN"], np.full(n_p, LATTICE_NM), np.full(n_p, 60.0),
+                  np.ones(n_p, bool)))  # fmt: skip
+    rng = np.random.default_rng(REFERENCE_SEEDS["effects"])
+    effects = training_effects(TYPICAL_FRACTION)
+    traces, owner = [], []
+    first = 0
+    for x, F, a, v, flat in parts:
+        draws = []
+        for _ in range(EFFECT_DRAWS):
+            noisy = apply_instrument(F, effects, rng)[0]
+            keep = rng.random(F.shape[0]) < CLEAN_FRACTION
+            noisy[keep] = F[keep]
+            draws.append((np.arange(F.shape[0]), noisy))
+        draws.append((np.flatnonzero(flat), F[flat]))
+        for rows, forces in draws:
+            for i, f in zip(rows, forces, strict=True):
+                traces.append(Trace(x, f, f"reference:{first + i}", "reference",
+                                    {"lattice_nm": float(a[i]),
+                                     "velocity_nm_per_s": float(v[i])}))  # fmt: skip
+                owner.append(first + i)
+        first += F.shape[0]
+    return traces, np.array(owner)
+
+
+def write_reference(work: Path, out: Path, level: float = 0.995) -> None:
+    """Fit the bundled line model's :class:`EmbeddingReference` and write it to ``out``.
+
+    The moments come from the lines of 80 % of the reference trajectories, the limit
+    (the ``level`` quantile of the distance) from the other 20 %.
+    """
+    from stickslip.estimators.domain import EmbeddingReference
+    from stickslip.estimators.line.estimator import fingerprint, pooled_features
+    from stickslip.estimators.load import load_estimator
+
+    line = load_estimator(None)
+    traces, owner = reference_traces(work)
+    a = np.array([t.meta["lattice_nm"] for t in traces])
+    v = np.array([t.meta["velocity_nm_per_s"] for t in traces])
+    _, feats = pooled_features(line.ensemble, [t.x_nm for t in traces],
+                               [t.force_nN for t in traces], a, v)  # fmt: skip
+    held = np.random.default_rng(REFERENCE_SEEDS["effects"]).random(owner.max() + 1) < HOLD_OUT
+    test = held[owner]
+    ref = EmbeddingReference.fit(feats[:, ~test], fingerprint(line.ensemble), level=level)
+    in_sample = ref.limit
+    ref.set_limit(feats[:, test], level)
+    ref.save(out)
+    print(f"embedding reference: {int((~test).sum())} lines fit the moments, {int(test.sum())} "
+          f"held-out lines set the {level:.1%} limit {ref.limit:.3f} (in-sample "
+          f"{in_sample:.3f}); written to {out} ({out.stat().st_size / 1024:.0f} KiB)")
+
+
 def all_sets(n: int, seed: int, bench_seed: int, work: Path) -> dict[str, list[Trace]]:
     """Every set of the module docstring, by name."""
     sets = {k: non_pt_traces(k, n, seed, work) for k in NON_PT}
@@ -226,8 +311,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=ROOT / "build" / "domain")
     parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument("--write-reference", action="store_true",
+                        help="Fit the line model's embedding reference and write it to "
+                             "src/stickslip/resources/line_domain.npz, then stop.")  # fmt: skip
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    if args.write_reference:
+        write_reference(args.work, ROOT / "src" / "stickslip" / "resources" / "line_domain.npz")
+        return
     from stickslip.estimators.classical.estimator import ClassicalEstimator
     from stickslip.estimators.load import load_estimator
 

@@ -35,8 +35,9 @@ its experimental traces.
 
 Scored through :mod:`stickslip.jobs.evaluate` only. "<F>" is the network's own
 estimate (``F_mean_net``, as the paper's NN); "<F> mean" the result table's
-``F_mean_nN``, the trace's own mean, for comparison. Models and data are cached in
---work; writes summary.json and one evaluation folder per row there.
+``F_mean_nN``, the trace's own mean, for comparison. Models and MD sweeps are cached in
+--work, the bench in lab_bench.py's file (build/lab-bench/bench_200.h5, or --bench);
+writes summary.json and one evaluation folder per row into --work.
 
 Usage: python benchmarks/paper_table.py [--work build/paper-table] [--n-train 1600]
        [--n-test 400] [--n-per-material 200] [--bench PATH] [--epochs 50]

@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from stickslip.diagnostics.ppc import noise_level_nN, posterior_predictive_check
+from stickslip.diagnostics.ppc import posterior_predictive_check
+from stickslip.estimators.noise import noise_nN
 from stickslip.simulators import simulate
 
 
@@ -11,7 +12,7 @@ def test_noise_level_is_recovered_on_stick_slip():
     rng = np.random.default_rng(0)
     noisy = r.force_nN + rng.normal(0, 0.05, r.force_nN.shape)
     # the clean trace has its own thermal jitter; the added noise adds in quadrature
-    extra = np.sqrt(noise_level_nN(noisy)[0] ** 2 - noise_level_nN(r.force_nN)[0] ** 2)
+    extra = np.sqrt(noise_nN(noisy)[0] ** 2 - noise_nN(r.force_nN)[0] ** 2)
     assert abs(extra / 0.05 - 1) < 0.25
 
 

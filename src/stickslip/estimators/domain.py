@@ -63,7 +63,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
 
@@ -153,11 +153,13 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     out[SPAN] = span
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _check_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    # one thread: ~0.1 ms per 512-pixel line, and it compiles in seconds where a
+    # parallel loop takes minutes
     n = offsets.size - 1
     out = np.empty((n, N_FIELDS))
-    for i in prange(n):
+    for i in range(n):
         lo, hi = offsets[i], offsets[i + 1]
         _check_one(xs[lo:hi], Fs[lo:hi], out[i])
     return out
@@ -393,8 +395,14 @@ class EmbeddingReference:
             floor = shrinkage * max(float(lam.sum()) / D, 1e-30)
             comps[m], var[m], res[m] = vt[:k], lam + floor, floor
         ref = cls(mean, comps, var, res, 1.0, level, fingerprint)
-        ref.limit = float(np.quantile(ref.raw_distance(feats), level))
+        ref.set_limit(feats, level)
         return ref
+
+    def set_limit(self, features: np.ndarray, level: float) -> None:
+        """Set :attr:`limit` to the ``level`` quantile of the distances of these lines'
+        features (M, N, D): held-out reference lines give an honest limit."""
+        self.limit = float(np.quantile(self.raw_distance(features), level))
+        self.level = float(level)
 
     def raw_distance(self, features: np.ndarray) -> np.ndarray:
         """Distance (mean over members) of N lines' features (M, N, D), not scaled."""

@@ -183,6 +183,11 @@ def _check(table: ResultTable, traces: Sequence[Trace], progress: Progress | Non
     if n_volts:
         table.notes.append(f"--check skipped for {n_volts} trace(s) in volts: the PT model "
                            "is simulated in nN (pass --calibration)")  # fmt: skip
+    coarse = [i for i in todo if traces[i].pixel_nm > table.rows[i]["lattice_nm"] / 4]
+    if coarse:  # the statistics need slips resolved (and the simulation would be long)
+        table.notes.append(f"--check skipped for {len(coarse)} trace(s) whose pixels are "
+                           "longer than a quarter lattice period")  # fmt: skip
+        todo = [i for i in todo if i not in set(coarse)]
     reps: dict[int, np.ndarray] = {}
     layouts: dict[tuple[int, float], list[int]] = {}
     for i in todo:

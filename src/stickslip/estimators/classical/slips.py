@@ -38,7 +38,8 @@ LOWER_FRACTION = 0.5  # stick slope fitted up to this fraction of the stick's ri
 MIN_LOWER_SAMPLES = 4  # ... but on at least this many samples
 BEND_FRACTION = 0.15
 TAIL_BOUND = 1.5  # largest response time, in units of the time a slip takes to end
-TAU_MIN = 0.25  # response time (samples) below which the trace is left as it is  # guard-pixel deficit, in units of the fitted rise, that flags a bend
+TAU_MIN = 0.25
+SMOOTH_TAU = 3.0  # response time (samples) from which the restored trace is smoothed
 
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
@@ -589,7 +590,7 @@ def _line_sums(y: np.ndarray, lo: int, hi: int) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def response_time(F: np.ndarray, events: np.ndarray) -> float:
+def response_time(F: np.ndarray, events: np.ndarray, tail: float) -> float:
     """Time constant (samples) of a first-order detector response, from the slip tails.
 
     A detector of finite bandwidth turns an instantaneous drop into an exponential
@@ -597,10 +598,14 @@ def response_time(F: np.ndarray, events: np.ndarray) -> float:
     stick branch plus ``A rho^i``, ``rho = exp(-1/tau)``. The lower half of every stick
     after a slip (its top may soften) is fitted by a line plus that term (its own
     ``A``; one ``rho`` for the trace) and ``tau`` is the grid value (0, then 0.3
-    samples up to half the typical fitted part and 1.5 times the typical time from
-    a slip's steepest point to its end, 1.15 apart) with the least total squared
-    residual, refined by a parabola in ``log tau``. 0 when the tails show no
-    exponential approach.
+    samples up to half the typical fitted part and 1.5 ``tail``, 1.15 apart) with the
+    least total squared residual, refined by a parabola in ``log tau``. 0 when the
+    tails show no exponential approach.
+
+    ``tail`` is the typical time (samples) from a slip's steepest point to its end as
+    detected on the recorded trace: an exponential approach of time ``tau`` keeps the
+    drop going for about ``tau`` past that point, so slips that end sooner bound
+    ``tau`` (the fit alone could take a curved stick branch for a slow tail).
     """
     n = F.size
     ne = events.shape[0]
@@ -624,13 +629,7 @@ def response_time(F: np.ndarray, events: np.ndarray) -> float:
     Ps = np.empty((nseg, 7))
     for k in range(nseg):
         Ps[k] = _line_sums(F, los[k], his[k])
-    # an exponential approach of time tau keeps the drop going for about tau samples
-    # past its steepest point: slips that end sooner bound tau (the fit alone would
-    # take a curved stick branch for a slow tail)
-    tail = np.empty(ne)
-    for k in range(ne):
-        tail[k] = events[k, 5]
-    tmax = min(np.median(lens[:nseg]) / 2.0, TAIL_BOUND * np.median(tail))
+    tmax = min(np.median(lens[:nseg]) / 2.0, TAIL_BOUND * tail)
     taus = np.zeros(96)
     nt = 1
     t = 0.3
@@ -670,6 +669,20 @@ def response_time(F: np.ndarray, events: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _box(F: np.ndarray, h: int) -> np.ndarray:
+    """Centred moving mean over ``2 h + 1`` samples (shorter at the ends): keeps lines
+    and the position of slips, smears a slip symmetrically."""
+    n = F.size
+    C = _cumsum0(F)
+    G = np.empty(n)
+    for i in range(n):
+        lo = max(0, i - h)
+        hi = min(n - 1, i + h)
+        G[i] = (C[hi + 1] - C[lo]) / (hi - lo + 1)
+    return G
+
+
+@njit(cache=True, error_model="numpy")
 def deconvolve(F: np.ndarray, tau: float) -> np.ndarray:
     """Undo a first-order response of time constant ``tau`` (samples):
     ``F_in[i] = (F[i] - (1 - alpha) F[i-1]) / alpha``, ``alpha = 1 - exp(-1/tau)``."""
@@ -700,13 +713,17 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
     n = F.size
     events, w, sigma, _ = detect_slips(x, F)
     # a detector's finite bandwidth smears slips into the following stick: undo it
-    # (slips missed on the smeared trace show up once it is sharpened: estimate again)
-    F0 = F
-    for _ in range(2):
-        tau = response_time(F0, events)
-        if not (tau > TAU_MIN):
-            break
-        F = deconvolve(F0, tau)
+    tail = np.median(events[:, 5]) if events.shape[0] > 0 else 0.0
+    tau = response_time(F, events, tail)
+    if tau > TAU_MIN:
+        # slips missed on the smeared trace show up once it is sharpened: estimate again
+        ev2, _, _, _ = detect_slips(x, deconvolve(F, tau))
+        tau2 = response_time(F, ev2, tail)
+        if tau2 > TAU_MIN and ev2.shape[0] >= events.shape[0]:
+            tau = tau2
+        F = deconvolve(F, tau)
+        if tau >= SMOOTH_TAU:  # its amplified noise, averaged over the response time
+            F = _box(F, int(tau / 2.0 + 0.5))
         events, w, _, _ = detect_slips(x, F)
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
