@@ -72,8 +72,8 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     out[WINDOW] = w
     out[FRAC_MULTIPLE] = 0.0
     if ns == 0:
-        # no scale at which the trace stands above its noise: too noisy; else smooth
-        out[STATUS] = 3 if w == 0 else 2
+        span = sl._force_range(x, F)
+        out[STATUS] = 3 if span < 10.0 * sigma else 2
         return
     # spread of the mean force over stick-slip cycles
     if ns >= 2:
