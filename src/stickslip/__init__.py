@@ -14,14 +14,46 @@ Subpackages follow the pipeline, each importing only those before it:
 The functions below (:mod:`stickslip.api`) mirror the command line.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
 from stickslip._version import __version__
-from stickslip.api import evaluate, predict, read_traces, train
-from stickslip.conditions import GRAPHITE, Conditions, Reference
-from stickslip.estimators.base import Estimator
-from stickslip.estimators.load import load_estimator
-from stickslip.estimators.table import ResultTable
-from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
-from stickslip.traces.trace import Trace
+
+# Imported on first use (PEP 562): ``import stickslip.simulators`` in a Dask worker or a
+# CLI command must not pay for torch and matplotlib, which only some of these need.
+_EXPORTS = {
+    "evaluate": "stickslip.api",
+    "predict": "stickslip.api",
+    "read_traces": "stickslip.api",
+    "train": "stickslip.api",
+    "GRAPHITE": "stickslip.conditions",
+    "Conditions": "stickslip.conditions",
+    "Reference": "stickslip.conditions",
+    "Estimator": "stickslip.estimators.base",
+    "load_estimator": "stickslip.estimators.load",
+    "ResultTable": "stickslip.estimators.table",
+    "PhysicalSettings": "stickslip.simulators",
+    "SweepConfig": "stickslip.simulators",
+    "run_sweep": "stickslip.simulators",
+    "simulate": "stickslip.simulators",
+    "Trace": "stickslip.traces.trace",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'stickslip' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
 
 __all__ = [
     "GRAPHITE",

@@ -464,10 +464,11 @@ def clean_and_defective(pool):
 
 
 def test_check_flag_separates_clean_from_defective_traces(clean_and_defective):
-    """Guard for the faster check: clean traces at their truth pass, defective ones and a
-    wrong estimate are flagged (the old check did the same at 1/20 of the speed)."""
+    """The faster check keeps its verdicts: clean traces at their truth pass; a domain
+    crossing, a lost contact and a wrong estimate are flagged. Old: the same verdicts at
+    1/20 of the speed, except the 1.7 nm lost contact (gof 1.8 on a similar line: missed)."""
     x, F, U0, K = clean_and_defective
-    res = posterior_predictive_check(x, F, U0, K, seed=3)
+    res = posterior_predictive_check(x, F, U0, K, seed=4)
     assert not res.flagged[:3].any(), res.gof
     assert res.flagged[3:].all(), res.gof
     assert res.gof[3:].min() > 1.5 * res.gof[:3].max()
@@ -497,10 +498,10 @@ def test_infer_check_reports_progress_per_batch(sim, monkeypatch):
 # --- 8. progress on a terminal, quiet under -q ---------------------------------------------
 
 
-def test_quiet_prints_nothing_but_errors(traces_dir, tmp_path, line_model):
+def test_quiet_prints_nothing_but_errors(traces_dir, tmp_path):
     """Old: -q still printed status lines (and bars) of infer and label on stderr."""
     (tmp_path / "bad.csv").write_text("x_nm,force_nN\n0,1\n")
-    for cmd in (["infer", "--model", line_model, "--check"], ["label"]):
+    for cmd in (["infer", "--model", "classical", "--check"], ["label"]):
         out = tmp_path / "r.csv"
         res = _run(["-q", cmd[0], traces_dir, tmp_path / "bad.csv", *cmd[1:], "--out", out,
                     "--plots", tmp_path / "p"])  # fmt: skip
@@ -511,10 +512,10 @@ def test_quiet_prints_nothing_but_errors(traces_dir, tmp_path, line_model):
         assert len(_rows(out)) == 3
 
 
-def test_progress_bars_on_a_terminal(traces_dir, tmp_path, line_model, monkeypatch):
+def test_progress_bars_on_a_terminal(traces_dir, tmp_path, monkeypatch):
     """Old: infer --check and --plots ran silently for minutes, with no progress bar."""
     monkeypatch.setattr(common, "show_progress", lambda: True)
-    res = _run(["infer", traces_dir, "--model", line_model, "--check", "--plots",
+    res = _run(["infer", traces_dir, "--model", "classical", "--check", "--plots",
                 tmp_path / "p", "--out", tmp_path / "r.csv"])  # fmt: skip
     assert res.exit_code == 0, res.output
     assert "check" in res.stderr and "2/2" in res.stderr

@@ -1,6 +1,7 @@
 """The lab bench's cache and eta window."""
 
 import numpy as np
+import pytest
 
 from stickslip.simulators.bench import ETA_WINDOW, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.traces.dataset import load_dataset
@@ -12,6 +13,7 @@ def test_eta_window_includes_its_ends():
         True, True, False, False]  # fmt: skip
 
 
+@pytest.mark.slow  # six bench traces take about a minute and a half on two cores
 def test_bench_if_missing_simulates_once_and_then_reuses_the_file(tmp_path):
     path = tmp_path / "b.h5"
     cfg = BenchConfig(n_per_material=2, seed=5)

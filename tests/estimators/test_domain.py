@@ -208,4 +208,7 @@ def test_the_line_model_keeps_example_traces_in_domain_and_reversed_ones_out():
     for r in table.rows[n:]:
         assert not r["in_domain"]
         assert "sawtooth reversed" in r["domain_reason"]
-        assert r["domain_embedding"] > 1.0
+    # the embedding alone sees most of them too (the reference spans the effect families,
+    # so a reversed clean multiple-slip line can sit inside its limit)
+    emb = np.array([r["domain_embedding"] for r in table.rows])
+    assert np.mean(emb[n:] > 1.0) >= 0.75 and emb[n:].min() > emb[:n].max()

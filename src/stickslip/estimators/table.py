@@ -52,8 +52,8 @@ VOLT_STD_COLUMNS = tuple(f"{k}_std" for k in VOLT_TARGETS)
 INTERVAL_COLUMNS = tuple(f"{k}_{b}" for b in BOUNDS for k in TARGETS)
 CONDITION_COLUMNS = tuple(c for q in QUANTITIES for c in (q, q.split("_")[0] + "_source"))
 PROVENANCE = ("file", "channel", "direction", "line", "load", "load_unit")
-COLUMNS = (*HEAD, *TARGETS, *VOLT_TARGETS, *STD_COLUMNS, *VOLT_STD_COLUMNS, *INTERVAL_COLUMNS,
-           *CONDITION_COLUMNS, *PROVENANCE)  # fmt: skip
+COLUMNS = (*HEAD, *TARGETS[:3], *VOLT_TARGETS, TARGETS[3], *STD_COLUMNS[:3], *VOLT_STD_COLUMNS,
+           STD_COLUMNS[3], *INTERVAL_COLUMNS, *CONDITION_COLUMNS, *PROVENANCE)  # fmt: skip
 OK = "ok"
 TABLE_SUFFIXES = (".csv", ".json", ".parquet")
 # trace metadata that is not provenance: the unit is a reading detail, the conditions

@@ -13,7 +13,8 @@ from typing import Any
 from stickslip.estimators.window.modelfile import TrainedModel, load_model, save_model
 from stickslip.estimators.window.training import TrainConfig, spec_for_dataset, train_model
 from stickslip.simulators import PRESETS, SweepConfig, run_sweep
-from stickslip.traces.dataset import load_dataset, read_attrs
+from stickslip.simulators.sweep import partial_path
+from stickslip.traces.dataset import DatasetError, load_dataset, read_attrs
 
 PAPER_TRAIN_SEED = 0  # the bundled window model's training data (the line model's expert)
 PAPER_HELDOUT_SEED = 1  # the bundled window model's recorded held-out set
@@ -29,6 +30,8 @@ def sweep_if_missing(
 
     ``physics`` is a preset name or a :class:`~stickslip.simulators.PhysicalSettings`.
     An existing file is reused only if it was made with the same settings, size and seed.
+    A ``.partial`` left by an interrupted run is resumed when it was started with the same
+    settings (its finished trajectories are kept), and replaced otherwise.
     """
     preset = physics if isinstance(physics, str) else "custom"
     ph = PRESETS[physics] if isinstance(physics, str) else physics
@@ -36,6 +39,11 @@ def sweep_if_missing(
     path = Path(path)
     if path.exists() and read_attrs(path).get("config") == cfg.to_json():
         return path
+    if partial_path(path).exists():
+        try:
+            return run_sweep(cfg, path, resume=True)
+        except DatasetError:  # another run's leftover: a cache may replace it
+            return run_sweep(cfg, path, overwrite=True)
     return run_sweep(cfg, path)
 
 

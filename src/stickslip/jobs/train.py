@@ -5,8 +5,10 @@
   (:func:`stickslip.estimators.line.training.train_line_ensemble`);
 - ``kind="window"``: the reference paper's MLP (raw or pi input).
 
-Training data are simulated sweeps (HDF5 or Zarr, labels inside), or trace files and
-folders with a label table (``trace, U0_eV, K_N_m, F_mean_nN``: the paper's Exp->Exp).
+Training data are simulated sweeps (HDF5 or Zarr, labels inside; a sweep's forces stay
+on disk and the line kind streams them a chunk at a time, so a set need not fit in
+memory), or trace files and folders with a label table (``trace, U0_eV, K_N_m,
+F_mean_nN``: the paper's Exp->Exp).
 ``mix`` adds labelled real traces to simulated training as a given fraction of the
 training lines (the paper's 1 %). :func:`bundled_line_data` builds the data the bundled
 line model was trained on, so ``stickslip train --kind line --recipe bundled``
@@ -27,6 +29,7 @@ import numpy as np
 from stickslip.conditions import Reference
 from stickslip.diagnostics.plots import loss_curve
 from stickslip.estimators.line.modelfile import save_line_model
+from stickslip.estimators.line.streaming import StreamSettings
 from stickslip.estimators.line.training import LineTrainConfig, train_line_ensemble
 from stickslip.estimators.mapping import refusal, to_reference
 from stickslip.estimators.window.estimator import WindowEstimator
@@ -47,6 +50,7 @@ from stickslip.traces.dataset import (
     concat_datasets,
     dataset_traces,
     load_dataset,
+    open_dataset,
 )
 from stickslip.traces.trace import Trace
 from stickslip.units import eta_from
@@ -102,8 +106,14 @@ def labelled_dataset(traces: Sequence[Trace], labels: Mapping[str, Mapping[str, 
     TrainingDataError
         If no trace has a usable label.
     """
-    columns = (*LABEL_COLUMNS, "lattice_nm", "velocity_nm_per_s", "temperature_K",
-               "mod_amplitude", "defect_count")
+    columns = (
+        *LABEL_COLUMNS,
+        "lattice_nm",
+        "velocity_nm_per_s",
+        "temperature_K",
+        "mod_amplitude",
+        "defect_count",
+    )
     rows: list[np.ndarray] = []
     params: dict[str, list[float]] = {k: [] for k in columns}
     missing = 0
@@ -126,9 +136,11 @@ def labelled_dataset(traces: Sequence[Trace], labels: Mapping[str, Mapping[str, 
         params["F_mean_nN"].append(F if np.isfinite(F) else float(np.mean(t.force_nN)))
         params["lattice_nm"].append(reference.lattice_nm)
         params["velocity_nm_per_s"].append(
-            float(t.meta.get("velocity_nm_per_s") or reference.velocity_nm_per_s))
+            float(t.meta.get("velocity_nm_per_s") or reference.velocity_nm_per_s)
+        )
         params["temperature_K"].append(
-            float(t.meta.get("temperature_K") or reference.temperature_K))
+            float(t.meta.get("temperature_K") or reference.temperature_K)
+        )
         # real lines: never taken for the simulator's flat-substrate (pristine) lines
         params["mod_amplitude"].append(np.nan)
         params["defect_count"].append(-1)
@@ -147,6 +159,9 @@ def read_training_data(data: Sequence[str | os.PathLike], labels: str | os.PathL
                        reference: Reference, echo: Echo | None = None) -> TrainingData:  # fmt: skip
     """Sweeps and labelled trace files/folders as one set of training rows.
 
+    Sweeps are opened, not read (:func:`~stickslip.traces.dataset.open_dataset`): their
+    forces are read when trained on.
+
     Raises
     ------
     TrainingDataError
@@ -159,11 +174,11 @@ def read_training_data(data: Sequence[str | os.PathLike], labels: str | os.PathL
     parts: list[dict[str, Any]] = []
     for p in sweeps:
         try:
-            d = load_dataset(p)
+            d = open_dataset(p)
+            parts.append({"path": str(p), "n": d.n, "fingerprint": d.fingerprint()})
         except DatasetError as e:
             raise TrainingDataError(str(e)) from None
         sets.append(d)
-        parts.append({"path": str(p), "n": d.n, "fingerprint": d.fingerprint()})
     if files:
         if labels is None:
             raise TrainingDataError("trace files need a label table (--labels TABLE.csv)")
@@ -255,14 +270,18 @@ def expert_model(expert: str, work: str | os.PathLike,
 
 def train_line(training: TrainingData, out: str | os.PathLike, config: LineTrainConfig,
                expert: TrainedModel | None = None, expert_name: str = "none",
-               progress: bool = True) -> dict[str, Any]:  # fmt: skip
-    """Train and save a line model; returns its training report."""
+               progress: bool = True,
+               stream: StreamSettings = StreamSettings()) -> dict[str, Any]:  # fmt: skip
+    """Train and save a line model; returns its training report.
+
+    Sweeps are streamed from disk (``stream``: loader workers, shuffle buffer; see
+    :mod:`stickslip.estimators.line.streaming`)."""
     d = training.data
     card: dict[str, Any] = {"sets": training.parts}
     if expert is not None:
         card["expert"] = {"model": expert_name, "dataset_fingerprint": expert.dataset_fingerprint}
-    ens, report = train_line_ensemble(d.force_nN.astype(float), d.x_nm, d.params, config,
-                                      progress=progress, expert=expert)  # fmt: skip
+    ens, report = train_line_ensemble(d.force_nN, d.x_nm, d.params, config, progress=progress,
+                                      expert=expert, stream=stream)  # fmt: skip
     report.pop("history", None)
     save_line_model(ens, out, config.channels, config.to_dict(), card, report)
     return report
@@ -275,7 +294,7 @@ def train_window(training: TrainingData, out: str | os.PathLike, recipe: str, co
 
     The validation metrics (per trajectory, mean over windows; :mod:`stickslip.jobs.evaluate`)
     are recorded in the file."""
-    d = training.data
+    d = training.data.in_memory()  # the window kind trains in memory
     if d.force_nN.shape[1] < window:
         raise TrainingDataError(f"--window {window} is longer than the traces "
                                 f"({d.force_nN.shape[1]} px)")  # fmt: skip

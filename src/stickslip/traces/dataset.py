@@ -43,11 +43,159 @@ class DatasetError(Exception):
     """A dataset file that cannot be used; ``str()`` is one line."""
 
 
+class Rows:
+    """The (N, pixels) force rows of a dataset, read a chunk of consecutive rows at a time.
+
+    Training streams a set through this interface (never all of it in memory); an
+    in-memory array is the same thing with chunks of :data:`ROW_CHUNK` rows
+    (:class:`ArrayRows`). Indexing (``rows[i]``, ``rows[a:b]``, ``rows[index_array]``)
+    reads only the rows asked for, one chunk at a time; ``np.asarray(rows)`` reads all.
+    """
+
+    shape: tuple[int, int]
+    dtype: np.dtype
+    chunk_rows: int
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start`` to ``stop`` (within one chunk or across several)."""
+        raise NotImplementedError
+
+    def chunks(self) -> list[tuple[int, int]]:
+        """``[start, stop)`` of every chunk, in row order."""
+        n = self.shape[0]
+        return [(s, min(s + self.chunk_rows, n)) for s in range(0, n, self.chunk_rows)]
+
+    def take(self, rows: np.ndarray) -> np.ndarray:
+        """Rows in the order given (repeats allowed), reading each chunk needed once."""
+        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+        out = np.empty((rows.size, self.shape[1]), self.dtype)
+        if not rows.size:
+            return out
+        if rows.min() < 0 or rows.max() >= self.shape[0]:
+            raise IndexError(f"row index out of range 0..{self.shape[0] - 1}")
+        starts = np.array([s for s, _ in self.chunks()])
+        which = np.searchsorted(starts, rows, side="right") - 1
+        for c in np.unique(which):
+            at = np.flatnonzero(which == c)
+            lo, hi = int(rows[at].min()), int(rows[at].max()) + 1
+            out[at] = self.read(lo, hi)[rows[at] - lo]
+        return out
+
+    def close(self) -> None:
+        """Release an open file (it is opened again when next read)."""
+
+    def __len__(self) -> int:
+        return int(self.shape[0])
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        if isinstance(key, slice):
+            start, stop, step = key.indices(self.shape[0])
+            return self.read(start, max(start, stop))[::step]
+        if np.ndim(key) == 0:
+            return self.take(np.array([int(key)]))[0]
+        key = np.asarray(key)
+        return self.take(np.flatnonzero(key) if key.dtype == bool else key)
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        a = self.read(0, self.shape[0])
+        return a if dtype is None else a.astype(dtype)
+
+
+class ArrayRows(Rows):
+    """An in-memory (N, pixels) array as :class:`Rows` (no copy)."""
+
+    def __init__(self, array: np.ndarray, chunk_rows: int = ROW_CHUNK):
+        self.array = np.asarray(array)
+        self.shape = (int(self.array.shape[0]), int(self.array.shape[1]))
+        self.dtype = self.array.dtype
+        self.chunk_rows = max(1, int(chunk_rows))
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        return self.array[start:stop]
+
+    def take(self, rows: np.ndarray) -> np.ndarray:
+        return self.array[np.asarray(rows, dtype=np.int64).reshape(-1)]
+
+
+class FileRows(Rows):
+    """``force_nN`` of a sweep file or Zarr store, read by its own chunks (lazily).
+
+    The file is opened on first read in each process, so loader workers that fork or
+    unpickle a copy each read through a handle of their own.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._file: Any = None
+        self._pid: int | None = None
+        self._array: Any = None
+        a = self._open()
+        self.shape = (int(a.shape[0]), int(a.shape[1]))
+        self.dtype = np.dtype(a.dtype)
+        self.chunk_rows = int(a.chunks[0]) if a.chunks else ROW_CHUNK
+        self.close()
+
+    def _open(self) -> Any:
+        if self._array is None or self._pid != os.getpid():
+            if is_zarr_path(self.path) or self.path.is_dir():
+                self._file = None
+                self._array = _open_zarr(self.path)["force_nN"]
+            else:
+                self._file = h5py.File(self.path, "r")
+                self._array = self._file["force_nN"]
+            self._pid = os.getpid()
+        return self._array
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        return np.asarray(self._open()[start:stop])
+
+    def close(self) -> None:
+        if self._pid == os.getpid() and getattr(self, "_file", None) is not None:
+            self._file.close()
+        self._file, self._array, self._pid = None, None, None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_file": None, "_array": None, "_pid": None}
+
+
+class ConcatRows(Rows):
+    """Several :class:`Rows` one after another (their chunks kept as they are)."""
+
+    def __init__(self, parts: list[Rows]):
+        self.parts = parts
+        self.offsets = np.cumsum([0] + [p.shape[0] for p in parts])
+        self.shape = (int(self.offsets[-1]), int(parts[0].shape[1]))
+        self.dtype = np.result_type(*(p.dtype for p in parts))
+        self.chunk_rows = max(p.chunk_rows for p in parts)
+
+    def chunks(self) -> list[tuple[int, int]]:
+        return [(int(o) + s, int(o) + e) for o, p in zip(self.offsets, self.parts, strict=False)
+                for s, e in p.chunks()]  # fmt: skip
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        out = [np.asarray(p.read(max(start - o, 0), min(stop - o, p.shape[0])), self.dtype)
+               for o, p in zip(self.offsets.tolist(), self.parts, strict=False)
+               if start < o + p.shape[0] and stop > o]  # fmt: skip
+        if not out:
+            return np.empty((0, self.shape[1]), self.dtype)
+        return out[0] if len(out) == 1 else np.concatenate(out)
+
+    def close(self) -> None:
+        for p in self.parts:
+            p.close()
+
+
+def as_rows(force_nN: np.ndarray | Rows) -> Rows:
+    """``force_nN`` as :class:`Rows` (an array: chunks of :data:`ROW_CHUNK` rows)."""
+    return force_nN if isinstance(force_nN, Rows) else ArrayRows(force_nN)
+
+
 @dataclass
 class Dataset:
-    """An in-memory simulated dataset."""
+    """A simulated dataset: parameters in memory, forces in memory or :class:`Rows` read
+    from the file (:func:`open_dataset`)."""
 
-    force_nN: np.ndarray
+    force_nN: np.ndarray | Rows
     x_nm: np.ndarray
     params: dict[str, np.ndarray]
     attrs: dict
@@ -65,10 +213,18 @@ class Dataset:
         import hashlib
 
         h = hashlib.sha256()
-        h.update(np.ascontiguousarray(self.force_nN, dtype=np.float32).tobytes())
+        f = self.force_nN  # hashed a chunk at a time: the same digest, bounded memory
+        for block in (f.read(s, e) for s, e in f.chunks()) if isinstance(f, Rows) else (f,):
+            h.update(np.ascontiguousarray(block, dtype=np.float32).tobytes())
         for k in ("U0_eV", "K_N_m"):
             h.update(np.ascontiguousarray(self.params[k], dtype=np.float64).tobytes())
         return h.hexdigest()[:16]
+
+    def in_memory(self) -> Dataset:
+        """This dataset with its forces read into memory (itself if they already are)."""
+        if not isinstance(self.force_nN, Rows):
+            return self
+        return Dataset(np.asarray(self.force_nN), self.x_nm, self.params, self.attrs)
 
 
 def is_zarr_path(path: str | os.PathLike) -> bool:
@@ -305,13 +461,18 @@ def zarr_contents(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, An
         raise DatasetError(f"{path}: unreadable Zarr store ({type(e).__name__}: {e})") from None
 
 
+def _check_sweep(p: Path, fmt: Any, done: np.ndarray) -> None:
+    """Raise a one-line DatasetError unless ``p`` is a complete stickslip sweep."""
+    if fmt != FORMAT:
+        raise DatasetError(f"{p}: not a stickslip dataset (format {FORMAT} expected)")
+    if not bool(np.all(done)):
+        raise DatasetError(f"{p}: incomplete dataset (finish it with --resume)")
+
+
 def _load_zarr(p: Path, rows: slice | np.ndarray | None) -> Dataset:
     g = _open_zarr(p)
     try:
-        if g.attrs.get("format") != FORMAT:
-            raise DatasetError(f"{p}: not a stickslip dataset (format {FORMAT} expected)")
-        if not bool(np.all(g["done"][:])):
-            raise DatasetError(f"{p}: incomplete dataset (finish it with --resume)")
+        _check_sweep(p, g.attrs.get("format"), g["done"][:])
 
         def take(a: Any) -> np.ndarray:
             if rows is None:
@@ -342,10 +503,7 @@ def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None
         return _load_zarr(p, rows)
     try:
         with h5py.File(p, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise DatasetError(f"{p}: not a stickslip dataset (format {FORMAT} expected)")
-            if not bool(np.all(f["done"][:])):
-                raise DatasetError(f"{p}: incomplete dataset (finish it with --resume)")
+            _check_sweep(p, f.attrs.get("format"), f["done"][:])
             sel = slice(None) if rows is None else rows
             force = f["force_nN"][sel]
             params = {k: v[sel] for k, v in f["params"].items()}
@@ -354,6 +512,41 @@ def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None
         raise
     except (OSError, KeyError) as e:
         raise DatasetError(f"{p}: unreadable dataset ({e})") from None
+
+
+def open_dataset(path: str | os.PathLike) -> Dataset:
+    """A sweep file or Zarr store with its forces left on disk (:class:`FileRows`).
+
+    Positions, parameters and attributes are read into memory (a few numbers per row);
+    the forces are read a chunk at a time when used, so a set larger than memory can be
+    trained on. The same checks as :func:`load_dataset`.
+
+    Raises
+    ------
+    DatasetError
+        If the file is missing, not HDF5 or Zarr, not a stickslip sweep, or incomplete.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise DatasetError(f"{p}: file not found")
+    try:
+        if is_zarr_path(p) or p.is_dir():
+            g = _open_zarr(p)
+            _check_sweep(p, g.attrs.get("format"), g["done"][:])
+            params = {k: np.asarray(a[...]) for k, a in g["params"].arrays()}
+            x_nm, attrs = np.asarray(g["x_nm"][:]), dict(g.attrs)
+        else:
+            with h5py.File(p, "r") as f:
+                _check_sweep(p, f.attrs.get("format"), f["done"][:])
+                params = {k: v[:] for k, v in f["params"].items()}
+                x_nm, attrs = f["x_nm"][:], dict(f.attrs)
+        return Dataset(force_nN=FileRows(p), x_nm=x_nm, params=params, attrs=attrs)
+    except DatasetError:
+        raise
+    except (OSError, KeyError) as e:
+        raise DatasetError(f"{p}: unreadable dataset ({e})") from None
+    except Exception as e:  # zarr raises its own error types for damaged stores
+        raise DatasetError(f"{p}: unreadable Zarr store ({type(e).__name__}: {e})") from None
 
 
 def concat_datasets(sets: list[Dataset], columns: list[str] | None = None) -> Dataset:
@@ -376,12 +569,19 @@ def concat_datasets(sets: list[Dataset], columns: list[str] | None = None) -> Da
         names = set(d.params) if columns is None else set(d.params) & set(keep)
         if not np.array_equal(d.x_nm, first.x_nm) or names != set(keep):
             raise DatasetError("datasets to join differ in positions or parameter columns")
+    if any(isinstance(d.force_nN, Rows) for d in sets):  # streamed parts stay on disk
+        force: np.ndarray | Rows = ConcatRows([as_rows(d.force_nN) for d in sets])
+    else:
+        force = np.vstack([d.force_nN for d in sets])
     return Dataset(
-        force_nN=np.vstack([d.force_nN for d in sets]),
+        force_nN=force,
         x_nm=first.x_nm,
         params={k: np.concatenate([d.params[k] for d in sets]) for k in keep},
-        attrs={**first.attrs, "n": sum(d.n for d in sets),
-               "config": json.dumps([d.config_json for d in sets])},  # fmt: skip
+        attrs={
+            **first.attrs,
+            "n": sum(d.n for d in sets),
+            "config": json.dumps([d.config_json for d in sets]),
+        },  # fmt: skip
     )
 
 

@@ -18,6 +18,7 @@ def model():
     return load_line_model(None)
 
 
+@pytest.mark.slow  # 45 bench traces: about two minutes (test_clean_paper_traces is the fast one)
 def test_bench_like_traces(model, tmp_path_factory):
     # lab effects, three lattices, 30 nm/s; seed disjoint from training and the bench
     path = make_bench(BenchConfig(n_per_material=15, seed=777),

@@ -45,17 +45,14 @@ import torch
 from torch import nn
 
 from stickslip.conditions import GRAPHITE, Reference
-from stickslip.estimators.calibration import gaussian_z
+from stickslip.estimators.calibration import SHAPE_LEVELS, SpreadClasses, gaussian_z
 from stickslip.estimators.mapping import to_reference
-from stickslip.estimators.noise import log_noise_level
 from stickslip.estimators.window.inference import predict_windows
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.units import eta_from
 
 TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
 Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)  # two-sided 68 % and 95 % Gaussian quantiles
-#: Levels at which a calibrated ensemble stores its standardised errors' quantiles.
-SHAPE_LEVELS = np.arange(1, 100) / 100.0
 INFER_CHUNK = 512
 N_EXPERT = 5  # expert inputs: U0', K', eta estimates and the windows' spread of U0', K'
 
@@ -323,57 +320,6 @@ class LineEnsemble:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
         mu, sd = self.predict_std(X, C)
         return mu * self.y_std + self.y_mean, sd * self.y_std
-
-
-@dataclass(frozen=True)
-class SpreadClasses:
-    """Classes of lines whose predictive spread is calibrated separately.
-
-    The networks' spread is right on average but not in every kind of line: on a quiet
-    line (no detector noise, as in a simulation) it is several times too wide, and
-    how much depends on whether the line was resampled onto the reference lattice.
-    Both can be read off the line itself, so each class gets its own scale factors:
-
-    - 0: quiet, recorded on the reference lattice (not resampled);
-    - 1: quiet, resampled from another lattice;
-    - 2, 3, ...: noisy, by noise level, between ``noise_edges``.
-
-    The noise level is ln of the median absolute second difference of the mapped line
-    (nN): a slip moves few pixels, so in a quiet line it stays tiny, while white
-    detector noise raises it directly. A line is quiet below ``quiet_below``.
-    """
-
-    quiet_below: float = -3.0
-    noise_edges: tuple[float, ...] = (-2.2, -1.7)
-
-    @property
-    def n(self) -> int:
-        """Number of classes."""
-        return 3 + len(self.noise_edges)
-
-    def classify(self, force_nN: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
-        """Class of each of B mapped lines of equal length.
-
-        Parameters
-        ----------
-        force_nN : ndarray (B, L)
-            Mapped lines (on the reference lattice and pixel).
-        lattice_ratio : ndarray (B,)
-            ``a / a0`` of each line (1: recorded on the reference lattice).
-        """
-        return self._from_level(log_noise_level(force_nN), lattice_ratio)
-
-    def classify_lines(self, lines: list[np.ndarray], lattice_ratio: np.ndarray) -> np.ndarray:
-        """:meth:`classify` for mapped lines of any lengths."""
-        return self._from_level(np.array([log_noise_level(f) for f in lines]), lattice_ratio)
-
-    def _from_level(self, level: np.ndarray, lattice_ratio: np.ndarray) -> np.ndarray:
-        on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
-        noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
-        return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy).astype(int)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass

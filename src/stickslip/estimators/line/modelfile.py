@@ -98,9 +98,7 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
         spec = LineSpec(**payload["spec"])
         classes = None
         if "spread_classes" in payload:
-            c = payload["spread_classes"]
-            classes = SpreadClasses(float(c["quiet_below"]),
-                                    tuple(float(e) for e in c["noise_edges"]))  # fmt: skip
+            classes = SpreadClasses.from_dict(payload["spread_classes"])
         expert = None
         if "expert" in payload:
             expert = from_payload(payload["expert"], f"{name} (expert)")

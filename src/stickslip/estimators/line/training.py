@@ -48,6 +48,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import torch
@@ -68,6 +69,7 @@ from stickslip.estimators.line.ensemble import (
     map_line,
     predict_std_lines,
 )
+from stickslip.estimators.line.streaming import LineBatches, StreamSettings, batch_loader
 from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.simulators.instrument import (
@@ -76,6 +78,7 @@ from stickslip.simulators.instrument import (
     InstrumentEffects,
     apply_instrument,
 )
+from stickslip.traces.dataset import Rows, as_rows
 from stickslip.units import eta_from
 
 #: Domain randomisation of training: broader than the laboratory bench.
@@ -95,6 +98,12 @@ TYPICAL_FRACTION = 0.8
 #: Settings only the spread calibration reads: a trained model can be re-calibrated
 #: with other values (``scripts/train_line_model.py --recalibrate``).
 CALIBRATION_FIELDS = ("spread_classes", "calibration_draws", "spread_power")
+
+#: Most validation trajectories held out (their lines, under every calibration draw, are
+#: kept in memory; beyond this the held-out share goes to training, so memory does not
+#: grow with the set). The sampling error of a 95 % coverage over n lines is
+#: sqrt(0.05 * 0.95 / n): 0.005 at 2000, before the calibration draws.
+MAX_VAL_LINES = 2000
 
 #: Exponents tried by :func:`power_fit`.
 EXPONENTS = np.linspace(0.5, 2.0, 61)
@@ -136,7 +145,8 @@ class LineTrainConfig:
     spread_power: bool = True  # calibrated std c * sd**gamma (False: gamma = 1)
     # detector effects: a typical measurement's for most lines, the broad ranges for the rest
     effects: InstrumentEffects | EffectsMixture = field(
-        default_factory=lambda: training_effects(TYPICAL_FRACTION))
+        default_factory=lambda: training_effects(TYPICAL_FRACTION)
+    )
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -270,10 +280,11 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     val_rng = np.random.default_rng([config.seed, 999, draw] if draw else [config.seed, 999])
     val_p = val[flat_substrate(params)[val]]
     a = params["lattice_nm"]
-    corrupted, mean_c = corrupt_and_map(force_nN[val], a[val], x_nm, spec, config.effects,
-                                        val_rng, config.clean_fraction)  # fmt: skip
-    pristine, mean_p = corrupt_and_map(force_nN[val_p], a[val_p], x_nm, spec, config.effects,
-                                       val_rng, keep_clean=np.ones(val_p.size, bool))  # fmt: skip
+    f_val, f_p = (np.asarray(force_nN[r], float) for r in (val, val_p))  # rows read here
+    corrupted, mean_c = corrupt_and_map(f_val, a[val], x_nm, spec, config.effects, val_rng,
+                                        config.clean_fraction)  # fmt: skip
+    pristine, mean_p = corrupt_and_map(f_p, a[val_p], x_nm, spec, config.effects, val_rng,
+                                       keep_clean=np.ones(val_p.size, bool))  # fmt: skip
     rows = np.concatenate([val, val_p])
     return ValidationSet(
         lines=corrupted + pristine,
@@ -305,8 +316,11 @@ def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
              rng: np.random.Generator) -> tuple[np.ndarray, ValidationSet, np.ndarray]:  # fmt: skip
     """Training indices, validation lines and the target matrix (:func:`line_targets`) of
     a run with ``config``; ``rng`` is the run's, its first draw the split (:func:`split`),
-    so training and re-calibration see the same validation lines."""
+    so training and re-calibration see the same validation lines. At most
+    :data:`MAX_VAL_LINES` trajectories are held out (the rest of the share trains)."""
     train, val = split_indices(force_nN.shape[0], config.val_fraction, rng)
+    if val.size > MAX_VAL_LINES:
+        train, val = np.concatenate([train, val[MAX_VAL_LINES:]]), val[:MAX_VAL_LINES]
     vs = validation_set(force_nN, x_nm, params, val, config, spec)
     Y = line_targets(params["U0_eV"], params["K_N_m"], params["F_mean_nN"],
                      params["lattice_nm"], spec)  # fmt: skip
@@ -402,6 +416,8 @@ def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray
         ]  # fmt: skip
     for g, name in ((0, "corrupted"), (1, "pristine")):
         m = cs.strata == g
+        if not m.any():  # e.g. calibration on the nuisance prior: no pristine stratum
+            continue
         report[f"val_{name}"] = {
             "n": int(m.sum()),
             "rel_rmse": named(np.sqrt(np.mean(rel[m] ** 2, axis=0))),
@@ -412,7 +428,7 @@ def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray
 
 
 def calibrate_on_validation(ens: LineEnsemble, vs: ValidationSet, Y: np.ndarray,
-                            force_nN: np.ndarray, x_nm: np.ndarray,
+                            force_nN: np.ndarray | Rows, x_nm: np.ndarray,
                             params: dict[str, np.ndarray],
                             config: LineTrainConfig) -> dict:  # fmt: skip
     """:func:`calibrate_and_report` on the calibration lines of a run's validation
@@ -421,7 +437,7 @@ def calibrate_on_validation(ens: LineEnsemble, vs: ValidationSet, Y: np.ndarray,
     return calibrate_and_report(ens, cs, Y[cs.rows], config.spread_classes, config.spread_power)
 
 
-def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.ndarray,
+def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray | Rows, x_nm: np.ndarray,
                               params: dict[str, np.ndarray],
                               config: LineTrainConfig) -> dict:  # fmt: skip
     """Re-fit the spread calibration of an ensemble that :func:`train_line_ensemble` trained
@@ -433,21 +449,46 @@ def recalibrate_line_ensemble(ens: LineEnsemble, force_nN: np.ndarray, x_nm: np.
     return calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config)
 
 
-def train_line_ensemble(
+def _prepare_rows(
     force_nN: np.ndarray,
+    rows: np.ndarray,
+    keep_clean: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    params: dict[str, np.ndarray],
+    x_nm: np.ndarray,
+    spec: LineSpec,
+    config: LineTrainConfig,
+) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+    """:func:`prepare_batch` of training rows (run in the loader's workers)."""
+    a, v = params["lattice_nm"][rows], params["velocity_nm_per_s"][rows]
+    return prepare_batch(force_nN, a, v, x_nm, spec, config.effects, rng, crop=spec.crop,
+                         clean_fraction=config.clean_fraction,
+                         keep_clean=keep_clean)  # fmt: skip
+
+
+def train_line_ensemble(
+    force_nN: np.ndarray | Rows,
     x_nm: np.ndarray,
     params: dict[str, np.ndarray],
     config: LineTrainConfig = LineTrainConfig(),
     spec: LineSpec = LineSpec(),
     progress: bool = True,
     expert: TrainedModel | None = None,
+    stream: StreamSettings = StreamSettings(),
 ) -> tuple[LineEnsemble, dict]:
     """Train an ensemble on simulated traces; returns it and a report (losses, metrics).
 
+    The training rows are streamed a chunk at a time
+    (:mod:`stickslip.estimators.line.streaming`), so only the validation rows (at most
+    :data:`MAX_VAL_LINES`), the parameters and a shuffle buffer per loader worker are
+    held in memory, whatever the size of the set.
+
     Parameters
     ----------
-    force_nN : ndarray (N, P)
-        Clean simulated traces.
+    force_nN : ndarray (N, P) or Rows
+        Clean simulated traces: in memory, or read from a file
+        (:func:`~stickslip.traces.dataset.open_dataset`).
     x_nm : ndarray (P,)
         Their positions.
     params : dict
@@ -456,6 +497,8 @@ def train_line_ensemble(
     expert : TrainedModel, optional
         A window model whose estimates the members read and gate (see
         :mod:`stickslip.estimators.line.ensemble`); it must read the reference lattice and pixel.
+    stream : StreamSettings
+        Loader workers, shuffle buffer and an optional cap on the steps of an epoch.
     """
     if expert is not None and (
         not np.isclose(expert.features.pixel_nm, spec.pixel_nm)
@@ -464,9 +507,8 @@ def train_line_ensemble(
         raise ValueError("the expert must read lines on the line model's lattice and pixel")
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    train, vs, Y = held_out(force_nN, x_nm, params, config, spec, rng)
-    a, v = params["lattice_nm"], params["velocity_nm_per_s"]
-    flat_train = train[flat_substrate(params)[train]]
+    source = as_rows(force_nN)
+    train, vs, Y = held_out(source, x_nm, params, config, spec, rng)
     # friction: the network predicts the correction to the observed mean (~ the offset)
     y_mean, y_std = Y[train].mean(axis=0), Y[train].std(axis=0)
     y_mean[0], y_std[0] = 0.0, 0.05
@@ -474,10 +516,14 @@ def train_line_ensemble(
     Xv = line_inputs(vs.lines, spec)  # cropped to a common length, to follow the loss
     Cv, Ev = vs.C, ens.expert_for(Xv)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
+    prepare = partial(_prepare_rows, params={k: params[k] for k in ("lattice_nm",
+                      "velocity_nm_per_s")}, x_nm=x_nm, spec=spec, config=config)  # fmt: skip
     history = []
-    steps_per_epoch = max(1, train.size // config.batch_size)
     t0 = time.perf_counter()
     for k in range(config.members):
+        batches = LineBatches(source, train, flat_substrate(params), prepare, config.batch_size,
+                              config.pristine_fraction, config.seed, k, stream)  # fmt: skip
+        steps_per_epoch = max(1, batches.batches_per_epoch())
         net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0,
                       spread_hidden=config.spread_hidden)  # fmt: skip
         opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -488,21 +534,11 @@ def train_line_ensemble(
                    disable=not progress)  # fmt: skip
         for epoch in bar:
             net.train()
-            order = rng.permutation(train)
-            total = 0.0
-            for b in range(steps_per_epoch):
-                idx = order[b * config.batch_size : (b + 1) * config.batch_size]
-                keep = np.zeros(idx.size, bool)
-                if flat_train.size and config.pristine_fraction > 0:
-                    n_p = int(rng.binomial(idx.size, config.pristine_fraction))
-                    idx[:n_p] = rng.choice(flat_train, n_p)
-                    keep[:n_p] = True
-                X, C, obs = prepare_batch(force_nN[idx], a[idx], v[idx], x_nm, spec,
-                                          config.effects, rng, crop=spec.crop,
-                                          clean_fraction=config.clean_fraction,
-                                          keep_clean=keep)  # fmt: skip
+            batches.epoch = epoch  # the loader's workers copy it when they start
+            total, steps = 0.0, 0
+            for X, C, idx, obs in batch_loader(batches):
                 mean, log_var, own = net.parts(X, C, ens.expert_for(X))
-                y = _standardise_friction(Y[idx], obs, y_mean, y_std)
+                y = _standardise_friction(Y[idx.numpy()], obs.numpy(), y_mean, y_std)
                 if epoch < config.mse_epochs:
                     loss = ((mean - y) ** 2).sum(dim=1).mean()
                 else:
@@ -515,19 +551,24 @@ def train_line_ensemble(
                 opt.step()
                 sched.step()
                 total += loss.item()
+                steps += 1
+                if steps == steps_per_epoch:  # a capped epoch: leave the rest unread
+                    break
             net.eval()
             with torch.inference_mode():
                 mv, _ = net(Xv, Cv, Ev)
                 val_mse = float(((mv - Yv) ** 2).mean())
-            history.append({"member": k, "epoch": epoch, "loss": total / steps_per_epoch,
+            history.append({"member": k, "epoch": epoch, "loss": total / max(steps, 1),
                             "val_mse": val_mse})  # fmt: skip
-            bar.set_postfix(loss=f"{total / steps_per_epoch:.3f}", val_mse=f"{val_mse:.4f}")
+            bar.set_postfix(loss=f"{total / max(steps, 1):.3f}", val_mse=f"{val_mse:.4f}")
         ens.members.append(net)
     report = {
-        **calibrate_on_validation(ens, vs, Y, force_nN, x_nm, params, config),
+        **calibrate_on_validation(ens, vs, Y, source, x_nm, params, config),
         "history": history,
         "train_seconds": time.perf_counter() - t0,
         "n_train": int(train.size),
         "n_val": int(vs.rows.size),
+        "loader": dataclasses.asdict(stream),
     }
+    source.close()
     return ens, report

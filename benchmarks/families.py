@@ -1,0 +1,184 @@
+"""Interval coverage on lines that carry the effect families, and leave-one-family-out.
+
+How the sets are made (independently of training and of each other):
+
+- two pools of clean randomised trajectories (the line model's training distribution,
+  :mod:`stickslip.simulators.randomised`), cached under ``--work``: calibration
+  (``--n-cal`` trajectories, seed 501) and evaluation (``--n-eval``, seed 601); no
+  training set uses these seeds;
+- calibration lines: ``--draws`` draws per calibration trajectory of the nuisance
+  prior (:mod:`stickslip.simulators.effects`) with the ``"train"`` implementation of
+  every family (seed 5101);
+- evaluation sets, all with the ``"eval"`` implementations (other functional forms
+  over the same documented ranges), one draw per evaluation trajectory: ``clean`` (no
+  effect), ``all`` (every family at its documented probability, seed 6101) and, per
+  family f, ``with f`` (the same prior with f on every line, seed 6200 + index of f).
+
+Calibrations compared:
+
+- ``shipped``: the model's calibration as loaded (for the bundled model: fitted on
+  draws of the older detector effects its members were trained with);
+- ``families``: :func:`stickslip.estimators.line.families.calibrate_on_families` on the
+  calibration lines, every family in the prior;
+- ``LOFO``: the same without family f (:meth:`NuisancePrior.without`), scored on
+  ``with f``: an effect the calibration never saw.
+
+Every set is scored through the estimator (``LineEstimator.predict``, the in/out-of-domain
+verdict and its widening included, as ``stickslip infer`` does) and
+:func:`stickslip.jobs.evaluate.evaluate`, on lines with 1.5 <= eta <= 40. Printed per
+set: 95 % coverage of <F>, U0, K, eta (binomial se about 0.011 at 0.95 on 380 lines),
+U0 and K relative RMSE, <F> RMSE, and the fraction in domain.
+
+``--write PATH`` saves the model calibrated on every family (the bundled model's
+calibration is made this way: ``--write src/stickslip/resources/line_model.pt``).
+
+Usage: python benchmarks/families.py [--work build/families] [--n-cal 600] [--n-eval 400]
+       [--draws 4] [--n-bench 120] [--line-model PATH] [--no-lofo] [--write PATH]
+       [--threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import platform
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from stickslip.estimators.line.estimator import LineEstimator
+from stickslip.estimators.line.families import (
+    FamilyCalibration,
+    calibrate_on_families,
+    draw_family_lines,
+)
+from stickslip.estimators.line.modelfile import (
+    BUNDLED,
+    line_metadata,
+    load_line_model,
+    save_line_model,
+)
+from stickslip.estimators.window.modelfile import load_bundled
+from stickslip.jobs.evaluate import evaluate, truth_from_traces
+from stickslip.simulators import effects as fx
+from stickslip.simulators.bench import (
+    BENCH_SEED,
+    MATERIALS,
+    BenchConfig,
+    bench_if_missing,
+    in_eta_window,
+)
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
+CAL_SEED, EVAL_SEED = 501, 601
+CAL_DRAW_SEED, ALL_SEED, WITH_SEED = 5101, 6101, 6200
+
+
+def score(estimator: LineEstimator, data: Dataset) -> dict:
+    """Coverage, errors and in-domain fraction of ``estimator`` on one set."""
+    traces = dataset_traces(data)
+    table = estimator.predict(traces)
+    truth = truth_from_traces(table, traces)
+    ok = in_eta_window(data.params["eta"])
+    names = [t.name for t, m in zip(traces, ok, strict=True) if m]
+    m = evaluate(table, {n: truth[n] for n in names}).metrics
+    rows = {r["trace"]: r for r in table.rows}
+    in_domain = np.mean([bool(rows[n].get("in_domain")) for n in names])
+    return {"n": len(names), "coverage95": {k: m[k]["coverage95"] for k in KEYS},
+            "coverage68": {k: m[k]["coverage68"] for k in KEYS},
+            "U0_rel_rmse": m["U0_eV"]["rel_rmse"], "K_rel_rmse": m["K_N_m"]["rel_rmse"],
+            "F_rmse_nN": m["F_mean_nN"]["rmse"], "in_domain": float(in_domain)}  # fmt: skip
+
+
+def line(name: str, r: dict) -> str:
+    cov = " ".join(f"{r['coverage95'][k]:.3f}" for k in KEYS)
+    return (f"  {name:26s} {r['n']:4d}  {cov}   {r['U0_rel_rmse']:6.2%} {r['K_rel_rmse']:6.2%} "
+            f"{r['F_rmse_nN']:.3f}  {r['in_domain']:.2f}")  # fmt: skip
+
+
+HEAD = f"  {'set':26s} {'n':>4s}  95 % cov <F>  U0    K     eta     U0 rel  K rel  <F> nN  in dom"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", type=Path, default=ROOT / "build" / "families")
+    ap.add_argument("--n-cal", type=int, default=600)
+    ap.add_argument("--n-eval", type=int, default=400)
+    ap.add_argument("--draws", type=int, default=FamilyCalibration.draws)
+    ap.add_argument("--training-draws", type=int, default=FamilyCalibration.training_draws,
+                    help="draws of the members' own training effects mixed into calibration")
+    ap.add_argument("--line-model", type=Path, default=None, help="default: the bundled one")
+    ap.add_argument("--no-lofo", action="store_true", help="skip leave-one-family-out")
+    ap.add_argument("--write", type=Path, default=None,
+                    help="save the model calibrated on every family here")
+    ap.add_argument("--n-bench", type=int, default=120,
+                    help="lab-bench lines per material (0: no bench)")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    args.work.mkdir(parents=True, exist_ok=True)
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
+          f"python {platform.python_version()}; torch threads {args.threads}")  # fmt: skip
+    cal_pool = cached_randomised_set(RandomisedConfig(n=args.n_cal, seed=CAL_SEED, chunk=100),
+                                     args.work)  # fmt: skip
+    eval_pool = cached_randomised_set(RandomisedConfig(n=args.n_eval, seed=EVAL_SEED, chunk=100),
+                                      args.work)  # fmt: skip
+    prior = fx.NuisancePrior()
+    sets = {"clean": eval_pool,
+            "all families": draw_family_lines(eval_pool, prior, ALL_SEED).data}  # fmt: skip
+    for j, f in enumerate(fx.FAMILIES):
+        sets[f"with {f}"] = draw_family_lines(eval_pool, prior.replace(f, p=1.0),
+                                              WITH_SEED + j).data  # fmt: skip
+    if args.n_bench:
+        # the lab bench (older lab effects, three materials) with a seed of its own
+        cfg = BenchConfig(n_per_material=args.n_bench, seed=BENCH_SEED + 3)
+        bench = load_dataset(bench_if_missing(cfg, args.work / f"bench_{cfg.n_per_material}_"
+                                                               f"{cfg.seed}.h5"))  # fmt: skip
+        for m, mat in enumerate(MATERIALS):
+            rows = np.flatnonzero(bench.params["material"] == m)
+            sets[f"bench {mat}"] = Dataset(bench.force_nN[rows], bench.x_nm,
+                                           {k: v[rows] for k, v in bench.params.items()},
+                                           bench.attrs)  # fmt: skip
+    shipped = load_line_model(args.line_model)
+    source = str(args.line_model or "bundled")
+    summary: dict = {"shipped": {}, "families": {}, "lofo": {}}
+    for label, ens in (("shipped", shipped), ("families", None)):
+        if ens is None:
+            ens = copy.deepcopy(shipped)
+            settings = FamilyCalibration(draws=args.draws, training_draws=args.training_draws)
+            report = calibrate_on_families(ens, cal_pool, settings)
+            families_ens, families_report = ens, report
+        print(f"\ncalibration: {label} ({source})\n{HEAD}")
+        est = LineEstimator(ens, source)
+        for name, data in sets.items():
+            r = score(est, data)
+            summary[label][name] = r
+            print(line(name, r), flush=True)
+    if not args.no_lofo:
+        print(f"\nleave-one-family-out: calibrated without f, scored on 'with f'\n{HEAD}")
+        for f in fx.FAMILIES:
+            ens = copy.deepcopy(shipped)
+            calibrate_on_families(ens, cal_pool,
+                                  FamilyCalibration(prior=prior.without(f), draws=args.draws,
+                                                    training_draws=args.training_draws))
+            r = score(LineEstimator(ens, source), sets[f"with {f}"])
+            summary["lofo"][f] = r
+            print(line(f"with {f}", r), flush=True)
+    (args.work / "summary.json").write_text(json.dumps(summary, indent=1))
+    print(f"\nwrote {args.work / 'summary.json'}")
+    if args.write is not None:
+        meta = (line_metadata(args.line_model) if args.line_model
+                else load_bundled(BUNDLED, line_metadata))  # fmt: skip
+        metrics = {**meta["metrics"], "family_calibration": families_report}
+        save_line_model(families_ens, args.write, tuple(meta["train_config"]["channels"]),
+                        meta["train_config"], meta["dataset"], metrics)  # fmt: skip
+        print(f"wrote {args.write}")
+
+
+if __name__ == "__main__":
+    main()

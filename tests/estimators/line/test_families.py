@@ -1,0 +1,77 @@
+"""Calibration of the line model on the nuisance prior (estimators.line.families)."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from stickslip.estimators.line.families import (
+    FamilyCalibration,
+    calibrate_on_families,
+    draw_family_lines,
+)
+from stickslip.estimators.line.modelfile import load_line_model
+from stickslip.simulators import PhysicalSettings, simulate
+from stickslip.simulators import effects as fx
+from stickslip.simulators.config import ParameterRange
+from stickslip.simulators.sampling import sample_parameters
+from stickslip.traces.dataset import Dataset
+from stickslip.units import eta_from
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """Clean paper-preset lines (graphite, 60 nm/s) with their truths; the seed is apart
+    from every training, calibration and benchmark pool."""
+    n, a, v = 40, 0.246, 60.0
+    U0, K = sample_parameters(ParameterRange(eta=(1.5, 20.0)), n, 9071, a)
+    res = simulate(U0, K, PhysicalSettings(), seed=9071)
+    params = {"U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, a),
+              "F_mean_nN": res.force_nN.mean(axis=1), "lattice_nm": np.full(n, a),
+              "velocity_nm_per_s": np.full(n, v), "temperature_K": np.full(n, 296.0)}  # fmt: skip
+    return Dataset(res.force_nN, np.arange(res.force_nN.shape[1]) * PhysicalSettings().pixel_nm,
+                   params, {})  # fmt: skip
+
+
+def test_lines_carry_truths_and_stated_conditions(clean):
+    prior = fx.NuisancePrior().replace("stated_conditions", p=1.0).replace("precursor", p=1.0)
+    lines = draw_family_lines(clean, prior, seed=3, draws=2)
+    d = lines.data
+    assert d.n == 2 * clean.n and lines.applied.shape == (d.n, len(fx.FAMILIES))
+    np.testing.assert_array_equal(lines.rows, np.tile(np.arange(clean.n), 2))
+    # the truths stay the trajectory's; the stated velocity is off by the drawn error
+    np.testing.assert_array_equal(d.params["U0_eV"], clean.params["U0_eV"][lines.rows])
+    v_true = clean.params["velocity_nm_per_s"][lines.rows]
+    err = d.params["velocity_nm_per_s"] / v_true - 1.0
+    assert np.all(np.abs(err) <= 0.15 + 1e-12) and np.mean(np.abs(err) > 1e-3) > 0.9
+    # <F> truth is the contact force's mean: precursor softening lowers it
+    assert np.all(d.params["F_mean_nN"] <= clean.params["F_mean_nN"][lines.rows] + 1e-9)
+    assert np.mean(d.params["F_mean_nN"] < clean.params["F_mean_nN"][lines.rows] - 1e-6) > 0.5
+    # a family left out of the prior is never applied
+    j = fx.FAMILIES.index("crosstalk")
+    assert not draw_family_lines(clean, prior.without("crosstalk"), 3).applied[:, j].any()
+
+
+def test_calibration_on_families_refits_only_the_spread(clean):
+    shipped = load_line_model(None)
+    mild, ens = copy.deepcopy(shipped), copy.deepcopy(shipped)
+    calibrate_on_families(mild, clean, FamilyCalibration(
+        prior=fx.NuisancePrior().only("gain", p=1.0), seed=11, draws=3))  # fmt: skip
+    settings = FamilyCalibration(prior=fx.NuisancePrior().without("mains"), seed=11, draws=3)
+    report = calibrate_on_families(ens, clean, settings)
+    # the members are untouched, only the spread is refitted
+    for a, b in zip(ens.members, shipped.members, strict=True):
+        for (k, va), vb in zip(a.state_dict().items(), b.state_dict().values(), strict=True):
+            assert np.array_equal(va.numpy(), vb.numpy()), k
+    # the broad prior corrupts more than a mild gain variation: wider intervals
+    # (the spread's power law makes them compare at the members' typical spread)
+    sd = np.array([0.1, 0.2, 0.2, 0.2])
+    assert np.median(ens.scale * sd**ens.exponent / (mild.scale * sd**mild.exponent)) > 1.0
+    # on its own calibration lines the 95 % intervals hold (a quantile fit)
+    cov = report["val_coverage95"]
+    assert all(0.85 <= cov[k] <= 1.0 for k in cov), cov
+    fc = report["family_calibration"]
+    assert "mains" not in fc["families"] and fc["seed"] == 11 and fc["draws"] == 3
+    assert fc["n_trajectories"] == clean.n
