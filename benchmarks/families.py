@@ -12,7 +12,11 @@ How the sets are made (independently of training and of each other):
 - evaluation sets, all with the ``"eval"`` implementations (other functional forms
   over the same documented ranges), one draw per evaluation trajectory: ``clean`` (no
   effect), ``all`` (every family at its documented probability, seed 6101) and, per
-  family f, ``with f`` (the same prior with f on every line, seed 6200 + index of f).
+  family f, ``with f`` (the same prior with f on every line, seed 6200 + index of f);
+- trace/retrace pairs (seed 6401): per evaluation trajectory a trace and a retrace row
+  with the same crosstalk term (its sign flipped on the retrace row, as the map readers
+  store it) and every other family drawn per direction; scored as single rows and as
+  the pair's ``friction_pair_nN`` (:mod:`stickslip.estimators.pairs`).
 
 Calibrations compared:
 
@@ -60,6 +64,7 @@ from stickslip.estimators.line.modelfile import (
     load_line_model,
     save_line_model,
 )
+from stickslip.estimators.pairs import pair_friction
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators import effects as fx
@@ -76,7 +81,7 @@ from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
 CAL_SEED, EVAL_SEED = 501, 601
-CAL_DRAW_SEED, ALL_SEED, WITH_SEED = 5101, 6101, 6200
+CAL_DRAW_SEED, ALL_SEED, WITH_SEED, PAIR_SEED = 5101, 6101, 6200, 6401
 
 
 def score(estimator: LineEstimator, data: Dataset) -> dict:
@@ -99,6 +104,46 @@ def line(name: str, r: dict) -> str:
     cov = " ".join(f"{r['coverage95'][k]:.3f}" for k in KEYS)
     return (f"  {name:26s} {r['n']:4d}  {cov}   {r['U0_rel_rmse']:6.2%} {r['K_rel_rmse']:6.2%} "
             f"{r['F_rmse_nN']:.3f}  {r['in_domain']:.2f}")  # fmt: skip
+
+
+def pair_rows(pool: Dataset, prior: fx.NuisancePrior, seed: int) -> tuple[Dataset, Dataset]:
+    """Trace and retrace rows of every evaluation trajectory with a crosstalk term on
+    both: the same term, entering the retrace row (read sign-flipped, as the map readers
+    store it) with the opposite sign; every other family drawn independently per
+    direction (``"eval"`` implementation). <F> truths: each row's contact force mean."""
+    prior = prior.replace("crosstalk", p=1.0)
+    x, clean = pool.x_nm, np.asarray(pool.force_nN, float)
+    v = pool.params["velocity_nm_per_s"]
+    out = []
+    rng = np.random.default_rng([seed, 0])
+    term = fx.crosstalk_term(fx.draw(prior, pool.n, rng, "eval"), x, rng)
+    for k, sign in ((1, 1.0), (2, -1.0)):
+        rng = np.random.default_rng([seed, k])
+        d = fx.draw(prior, pool.n, rng, "eval")
+        force, said = fx.apply(d, x, clean, v, rng, crosstalk_nN=sign * term)
+        params = {**pool.params, "velocity_nm_per_s": said.velocity_nm_per_s,
+                  "F_mean_nN": fx.contact_force(d, clean).mean(axis=1)}  # fmt: skip
+        out.append(Dataset(force, x, params, pool.attrs))
+    return out[0], out[1]
+
+
+def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> dict:
+    """<F> of single rows and of the pairs (:func:`stickslip.estimators.pairs.pair_friction`)
+    against their truths, on trajectories in the eta window."""
+    ok = in_eta_window(trace.params["eta"])
+    rows = [estimator.predict(dataset_traces(d)).rows for d in (trace, retrace)]
+    truth = 0.5 * (trace.params["F_mean_nN"] + retrace.params["F_mean_nN"])
+    single, pair, covered = [], [], []
+    for i in np.flatnonzero(ok):
+        rt, rr = rows[0][i], rows[1][i]
+        single += [rt["F_mean_nN"] - trace.params["F_mean_nN"][i],
+                   rr["F_mean_nN"] - retrace.params["F_mean_nN"][i]]  # fmt: skip
+        cols = pair_friction(rt, rr)
+        pair.append(cols["friction_pair_nN"] - truth[i])
+        covered.append(cols["friction_pair_nN_lo95"] <= truth[i] <= cols["friction_pair_nN_hi95"])
+    return {"n_pairs": int(ok.sum()), "single_rmse_nN": float(np.sqrt(np.mean(np.square(single)))),
+            "pair_rmse_nN": float(np.sqrt(np.mean(np.square(pair)))),
+            "pair_coverage95": float(np.mean(covered))}  # fmt: skip
 
 
 HEAD = f"  {'set':26s} {'n':>4s}  95 % cov <F>  U0    K     eta     U0 rel  K rel  <F> nN  in dom"
@@ -159,6 +204,13 @@ def main() -> None:
             r = score(est, data)
             summary[label][name] = r
             print(line(name, r), flush=True)
+    t_rows, r_rows = pair_rows(eval_pool, prior, PAIR_SEED)
+    pairs = score_pairs(LineEstimator(families_ens, source), t_rows, r_rows)
+    summary["pairs"] = pairs
+    print(f"\ntrace/retrace pairs with crosstalk on both (calibrated on the families): "
+          f"{pairs['n_pairs']} pairs; <F> RMSE single rows {pairs['single_rmse_nN']:.3f} nN, "
+          f"friction_pair_nN {pairs['pair_rmse_nN']:.3f} nN, its 95 % coverage "
+          f"{pairs['pair_coverage95']:.3f}")  # fmt: skip
     if not args.no_lofo:
         print(f"\nleave-one-family-out: calibrated without f, scored on 'with f'\n{HEAD}")
         for f in fx.FAMILIES:

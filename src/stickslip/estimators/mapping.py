@@ -42,6 +42,25 @@ def resample_mean(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float) -> np
     return np.diff(np.interp(new_edges, edges, cum)) / pixel_nm
 
 
+def resample_to_pixel(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float
+                      ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """A line on pixels of ``pixel_nm`` starting at ``x_nm[0]``, as an instrument sampling
+    at that pixel would record it: where the new pixels are coarser, the mean force over
+    each new pixel centred on its position (the recorded samples taken as constant over
+    pixels centred on theirs); where they are finer, linear interpolation. Returns the
+    new positions and forces."""
+    x = np.asarray(x_nm, dtype=float)
+    f = np.asarray(force_nN, dtype=float)
+    h = x[1] - x[0]
+    xn = np.arange(x[0], x[-1], pixel_nm)
+    if pixel_nm <= h:
+        return xn, np.interp(xn, x, f)
+    edges = np.concatenate([[x[0] - h / 2], x + h / 2])
+    integral = np.concatenate([[0.0], np.cumsum(f) * h])
+    e = np.concatenate([xn - pixel_nm / 2, [xn[-1] + pixel_nm / 2]])
+    return xn, np.diff(np.interp(e, edges, integral)) / pixel_nm
+
+
 def lattice_ratio(lattice_nm: float | np.ndarray, reference: Reference) -> np.ndarray:
     """``s = a / a0``."""
     return np.asarray(lattice_nm, dtype=float) / reference.lattice_nm

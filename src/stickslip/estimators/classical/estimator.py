@@ -90,11 +90,12 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     if good.sum() < MIN_SLIPS - 1 or segok.sum() < 2 or ns < MIN_SLIPS:
         out[STATUS] = 1
         return
-    out[K_EXP] = np.median(kseg[segok])
-    out[K_EXP_STD] = _spread(kseg[segok])
+    # a refusal carries no numbers: slopes between slips that noise may have made up
     if sigma > NOISE_TO_DROP_MAX * np.median(drops[good]):
         out[STATUS] = 3
         return
+    out[K_EXP] = np.median(kseg[segok])
+    out[K_EXP_STD] = _spread(kseg[segok])
     # mean peak, outliers (missed or spurious slips) trimmed at 4 sigma
     peaks = slp[good, sl.SLIP_PEAK]
     med = np.median(peaks)

@@ -2,13 +2,16 @@
 
 A slip is a drop of the force that is fast compared with the stick phase. It is found
 on the windowed difference ``D_w(i) = mean(F[i+1..i+w]) - mean(F[i-w+1..i])`` of the
-despiked trace, at the smallest window ``w`` (1, 2, 4, ...) whose detected drops are
-comparable with the force range: ``w = 1`` for simulated or AFM pixels (a slip lies
-within one pixel), larger for finely sampled recordings whose slips last many samples.
-A drop counts when it is below ``-max(5 sigma_w, 3 median|D_w|)``: the noise of
-``D_w`` (``sigma_w = sigma sqrt(2/w)``, ``sigma`` from second differences) and three
-times the typical stick rise, so smooth sliding, whose descent is as slow as its rise,
-has no slips. Nothing assumes that slips are one lattice spacing apart.
+despiked trace at scales ``w = 1, 2, 4, ...`` samples, so that nothing fixes how many
+samples a slip or a stick takes (from a few to tens of thousands per slip). A drop
+counts when it is below ``-max(5 noise_w, 3 median|D_w|)``: the noise of ``D_w`` at that
+scale (white noise ``sigma sqrt(2/w)``, or what the trace's own second differences of
+``w``-sample means show where the noise is correlated) and three times the typical
+stick rise, so smooth sliding, whose descent is as slow as its rise, has no slips.
+Slips are steps: their count holds from one scale to the next while noise events come
+and go. The detection scale is the one whose count holds and is largest, among the
+scales whose larger drops span half the force range; without such a scale, the finest
+of those. Nothing assumes that slips are one lattice spacing apart.
 
 Between slips lie stick segments. Each gets a robust quadratic fit (one pass of
 outlier rejection at 4 sigma) and a robust straight-line fit of its rising part. The
@@ -30,6 +33,10 @@ MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
 NOISE_SIGMAS = 5.0  # detection threshold on D_w in units of its noise
 RISE_FACTOR = 3.0  # ... and in units of the median |D_w| (typical stick rise)
 OUTLIER_SIGMAS = 4.0
+SPIKE_FACTOR = 2.0  # a spike stands out of its neighbours by this times their difference
+STICK_NOISE_RATIO = 0.7  # stick-only noise below this fraction of the overall: slips inflated it
+CLIP_SIGMAS = 3.5  # second differences beyond this (in MAD units) are slips, not noise
+DEPTH_QUANTILE = 75.0  # depth percentile of the events that must reach half the force range
 BEND_FRACTION = 0.15  # guard-pixel deficit, in units of the fitted rise, that flags a bend
 
 # columns of the per-segment table returned by `analyse_segments`
@@ -53,21 +60,97 @@ def _mad_sigma(v: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _clipped_sigma(d2: np.ndarray) -> float:
+    """Standard deviation of white noise from its second differences ``d2`` (``6 s^2``).
+
+    The MAD breaks down where slips make a large share of ``d2`` (a few samples per
+    slip): values beyond ``CLIP_SIGMAS`` and their neighbours, which share samples with
+    them, are left out and the MAD taken again, twice.
+    """
+    if d2.size == 0:
+        return 0.0
+    s = _mad_sigma(d2)
+    keep = np.ones(d2.size, dtype=np.bool_)
+    for _ in range(2):
+        cut = CLIP_SIGMAS * s
+        if not cut > 0:
+            break
+        keep[:] = True
+        for i in range(d2.size):
+            if abs(d2[i]) > cut:
+                keep[max(i - 1, 0) : i + 2] = False
+        if keep.sum() < max(8, d2.size // 4):
+            break
+        s_kept = _mad_sigma(d2[keep])
+        if not s_kept > 0:  # coarse digitisation: the kept values may all be equal
+            break
+        s = s_kept
+    return s / np.sqrt(6.0)
+
+
+@njit(cache=True, error_model="numpy")
 def noise_sigma(F: np.ndarray) -> float:
-    """White-noise standard deviation per sample from second differences (robust)."""
-    if F.size < 3:
+    """White-noise standard deviation per sample from second differences (robust).
+
+    With a few samples per slip, most second differences touch a slip and no robust
+    statistic of all of them is noise. The samples around the steepest drops (steps
+    below ``-RISE_FACTOR median|dF|``, slips or not) are then left out: if what remains
+    is clearly quieter (``STICK_NOISE_RATIO``), slips inflated the first figure.
+    """
+    n = F.size
+    if n < 3:
         return 0.0
     d2 = F[2:] - 2.0 * F[1:-1] + F[:-2]
-    return _mad_sigma(d2) / np.sqrt(6.0)
+    s_all = _mad_sigma(d2) / np.sqrt(6.0)
+    d1 = F[1:] - F[:-1]
+    cut = -RISE_FACTOR * np.median(np.abs(d1))
+    if not cut < 0:  # coarse digitisation: most steps are zero, nothing stands out
+        return s_all
+    keep = np.ones(n - 2, dtype=np.bool_)
+    for i in range(n - 1):
+        if d1[i] < cut:  # d2[j] reads samples j..j+2: those touching i or i + 1
+            keep[max(i - 2, 0) : min(i + 2, n - 2)] = False
+    if keep.sum() < 8:
+        return s_all
+    s_stick = _clipped_sigma(d2[keep])
+    return s_stick if s_stick < STICK_NOISE_RATIO * s_all else s_all
+
+
+@njit(cache=True, error_model="numpy")
+def _scale_noise(C: np.ndarray, w: int) -> float:
+    """Standard deviation of ``D_w`` that noise alone gives, measured at scale ``w``.
+
+    Second differences of consecutive ``w``-sample means (blind to the stick's linear
+    rise) hold white, 1/f, filtered or interpolated noise as it is at that scale; white
+    noise alone gives ``sigma sqrt(2/w)``. O(n/w) work.
+    """
+    m = (C.size - 1) // w
+    if m < 8:
+        return 0.0
+    b = np.empty(m)
+    for j in range(m):
+        b[j] = (C[(j + 1) * w] - C[j * w]) / w
+    return _clipped_sigma(b[2:] - 2.0 * b[1:-1] + b[:-2]) * np.sqrt(2.0)
 
 
 @njit(cache=True, error_model="numpy")
 def _despike(F: np.ndarray) -> np.ndarray:
-    # 3-point median: removes single-sample spikes, whose return looks like a slip
+    """Replace isolated one-sample spikes (whose return looks like a slip) by the mean
+    of their neighbours.
+
+    A spike leaves its two neighbours close to each other: the sample must stand out on
+    the same side of both by more than ``SPIKE_FACTOR`` times their difference. The peak
+    sample of a coarse sawtooth, whose neighbours differ by a whole drop, is kept (a
+    3-point median cuts every peak of a trace with a few samples per slip).
+    """
     G = F.copy()
     for i in range(1, F.size - 1):
         a, b, c = F[i - 1], F[i], F[i + 1]
-        G[i] = max(min(a, b), min(max(a, b), c))
+        lo = min(b - a, b - c)
+        hi = max(b - a, b - c)
+        gap = SPIKE_FACTOR * abs(c - a)
+        if lo > gap or hi < -gap:
+            G[i] = 0.5 * (a + c)
     return G
 
 
@@ -123,11 +206,44 @@ def _force_range(x: np.ndarray, F: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _cumsum0(G: np.ndarray) -> np.ndarray:
+    """``C[i] = sum(G[:i])`` (length ``n + 1``): any window mean in O(1)."""
+    C = np.zeros(G.size + 1)
+    for i in range(G.size):
+        C[i + 1] = C[i] + G[i]
+    return C
+
+
+@njit(cache=True, error_model="numpy")
+def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, buf: np.ndarray) -> int:
+    """Drops of ``D_w`` below ``-max(noise, RISE_FACTOR median|D_w|)`` into ``buf``."""
+    n = G.size
+    D = _window_diff(G, w)
+    Dv = D[w - 1 : n - w]
+    floor = RISE_FACTOR * np.median(np.abs(Dv)) if Dv.size > 0 else 0.0
+    # correlated noise (1/f, filtered, interpolated) is larger at scale w than white
+    noise_w = max(sigma * np.sqrt(2.0 / w), _scale_noise(C, w))
+    return _events(D, max(NOISE_SIGMAS * noise_w, floor), buf)
+
+
+@njit(cache=True, error_model="numpy")
+def _stable(a: int, b: int) -> bool:
+    """Event counts at two successive scales that agree (within 10 %)."""
+    return a > 0 and abs(a - b) <= max(1, int(0.1 * a + 0.5))
+
+
+@njit(cache=True, error_model="numpy")
 def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, float]:
     """Find slip events.
 
     Returns
     -------
+    Slips are steps: at scales from a slip's duration up to a fraction of the stick
+    they keep their count, while noise events come and go. Of the scales whose larger
+    events span half the force range (``DEPTH_QUANTILE``), the one whose count holds at
+    the next scale and is largest wins (noise can hide small slips at the finest
+    scale); without such a scale, the finest one whose events span the range.
+
     events : ndarray (n_events, 4)
         Rows ``(first, last, centre, depth)``: first/last index of the run of ``D_w``
         below threshold, its argmin (slip between samples ``centre`` and ``centre+1``)
@@ -143,19 +259,36 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     G = _despike(F)
     sigma = noise_sigma(F)
     span = _force_range(x, G)
+    C = _cumsum0(G)
     buf = np.empty((n, 4))
+    ws = np.empty(64, dtype=np.int64)
+    counts = np.zeros(64, dtype=np.int64)
+    deep = np.zeros(64, dtype=np.bool_)
+    ns = 0
     w = 1
-    wmax = max(1, n // 32)
-    while w <= wmax:
-        D = _window_diff(G, w)
-        Dv = D[w - 1 : n - w]
-        floor = RISE_FACTOR * np.median(np.abs(Dv)) if Dv.size > 0 else 0.0
-        thr = max(NOISE_SIGMAS * sigma * np.sqrt(2.0 / w), floor)
-        k = _events(D, thr, buf)
-        if k > 0 and np.median(buf[:k, 3]) >= 0.5 * span:
-            return buf[:k].copy(), w, sigma, span
+    best = -1
+    while w <= max(1, n // 32) and ns < 64:
+        ws[ns] = w
+        counts[ns] = _scale_events(G, C, w, sigma, buf)
+        k = counts[ns]
+        # the larger slips, not all (a multiple-slip trace mixes sizes), span the range
+        deep[ns] = k > 0 and np.percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
+        if ns > 0 and deep[ns - 1] and _stable(counts[ns - 1], k):
+            if best < 0 or counts[ns - 1] > counts[best]:
+                best = ns - 1
+        ns += 1
+        if best >= 0 and k < counts[best]:
+            break  # slips merge at coarser scales: no larger count follows
         w *= 2
-    return np.empty((0, 4)), 1, sigma, span
+    if best < 0:  # no scale where the count holds (coarse or short traces): the first deep one
+        for j in range(ns):
+            if deep[j]:
+                best = j
+                break
+    if best < 0:
+        return np.empty((0, 4)), 1, sigma, span
+    k = _scale_events(G, C, ws[best], sigma, buf)
+    return buf[:k].copy(), int(ws[best]), sigma, span
 
 
 @njit(cache=True, error_model="numpy")
@@ -319,10 +452,13 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
     w : int
         Detection window in samples.
     sigma : float
-        Noise per sample.
+        Noise per sample (:func:`noise_sigma`).
     """
     n = F.size
     events, w, sigma, _ = detect_slips(x, F)
+    # the fits' tolerance (outlier cut, bend test) is the scatter of all second
+    # differences, sharp corners of the branch included, not the sticks' noise alone
+    tol = _mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0) if n >= 3 else 0.0
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
     slips = np.full((ne, N_SLIP_COLS), np.nan)
@@ -336,7 +472,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
         # one guard sample at each end, against partly averaged pixels
         lo = start + 1 if k > 0 else start
         hi = end - 1 if k < ne else end
-        _fit_segment(x, F, lo, hi, sigma, segs[k])
+        _fit_segment(x, F, lo, hi, tol, segs[k])
         if k < ne:
             start = int(events[k, 1]) + w
     for k in range(ne):
@@ -346,7 +482,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
             continue
         if int(post[SEG_START]) <= int(pre[SEG_END]):
             continue
-        _locate_slip(x, F, pre, post, sigma, slips[k])
+        _locate_slip(x, F, pre, post, tol, slips[k])
     return segs, slips, w, sigma
 
 

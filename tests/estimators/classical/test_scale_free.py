@@ -1,0 +1,106 @@
+"""Slip detection without a built-in scale: 5 to 10,000 samples per slip (issue 19, item 5).
+
+Simulated paper-preset traces are resampled (pixel-averaged below, interpolated above
+the simulated resolution) to a given number of samples per lattice spacing, with white
+noise and a linear drift; the real macro recording is cut into slices of 50k to 200k
+samples.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stickslip.estimators.classical import estimate_trace
+from stickslip.estimators.mapping import resample_to_pixel
+from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.simulate import simulate
+from stickslip.units import fmax_nN
+
+SHARED_DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
+MACRO = SHARED_DATA / "macro-stickslip" / "k1002Nm_v42.mat"
+SPRING_N_M = 1002.0  # the spring of the macro set-up (file name k1002Nm)
+A = 0.246
+U0 = np.array([1.0, 2.0, 0.8, 4.0])  # eta 5.2, 5.2, 8.4, 5.2
+K = np.array([10.0, 20.0, 5.0, 40.0])
+LENGTH_NM = 5.0  # about 20 slips
+
+
+def resample(x: np.ndarray, F: np.ndarray, per_a: float) -> tuple[np.ndarray, np.ndarray]:
+    """``per_a`` samples per lattice spacing."""
+    return resample_to_pixel(x, F, A / per_a)
+
+
+def degrade(x: np.ndarray, F: np.ndarray, scale: float, noise: float, seed: int) -> np.ndarray:
+    """White noise ``noise * scale`` per sample and a drift of ``scale / 2`` over the line."""
+    rng = np.random.default_rng(seed)
+    return F + rng.normal(0.0, noise * scale, F.size) + 0.5 * scale * (x - x[0]) / (x[-1] - x[0])
+
+
+@pytest.fixture(scope="module")
+def fine() -> tuple[np.ndarray, np.ndarray]:
+    r = simulate(U0, K, PhysicalSettings(pixels=4096, length_nm=LENGTH_NM), seed=3)
+    return r.x_nm, r.force_nN
+
+
+@pytest.mark.parametrize("per_a", [10, 20, 100, 1000, 10_000])
+def test_resampled_traces_find_the_slips_and_K(fine, per_a):
+    x, Fs = fine
+    for i in range(U0.size):
+        xn, Fn = resample(x, Fs[i], per_a)
+        Fn = degrade(xn, Fn, float(fmax_nN(U0[i], A)), 0.03, seed=i)
+        est = estimate_trace(xn, Fn)
+        assert est.quality == "ok", (per_a, i, est.quality)
+        assert abs(est.n_slips - LENGTH_NM / A) <= 2, (per_a, i, est.n_slips)
+        assert est.K_N_m == pytest.approx(K[i], rel=0.20), (per_a, i)
+
+
+def test_five_samples_per_slip_is_the_lower_limit(fine):
+    # a few samples per slip: the sawtooth's peaks must survive the despiking
+    x, Fs = fine
+    xn, Fn = resample(x, Fs[0], 5)
+    est = estimate_trace(xn, degrade(xn, Fn, float(fmax_nN(U0[0], A)), 0.01, seed=0))
+    assert est.quality == "ok" and abs(est.n_slips - LENGTH_NM / A) <= 5
+    assert est.K_N_m == pytest.approx(K[0], rel=0.20)
+
+
+@pytest.mark.parametrize("per_a", [20, 1000, 10_000])
+def test_finely_sampled_smooth_sliding_stays_smooth(per_a):
+    r = simulate([0.3], [40.0], PhysicalSettings(pixels=1024, length_nm=3.0), seed=1)  # eta 0.39
+    xn, Fn = resample(r.x_nm, r.force_nN[0], per_a)
+    est = estimate_trace(xn, degrade(xn, Fn, float(fmax_nN(0.3, A)), 0.03, seed=0))
+    assert est.quality == "smooth sliding" and est.regime == "smooth"
+
+
+@pytest.fixture(scope="module")
+def macro() -> tuple[np.ndarray, np.ndarray]:
+    if not MACRO.is_file():
+        pytest.skip(f"real data missing: {MACRO} (clone shared/ beside the project)")
+    from scipy.io import loadmat
+
+    d = loadmat(MACRO)
+    t, fnorm = d["t"].ravel(), d["Fnorm"].ravel()
+    # x = v t with v = 42 um/s, F = Fnorm m g: in nm and nN the slope is in N/m
+    return 42e3 * (t - t[0]), fnorm * 0.0307 * 9.81 * 1e9
+
+
+@pytest.mark.parametrize("length", [50_000, 100_000, 200_000])
+@pytest.mark.parametrize("start", [0, 100_000, 300_000, 500_000])
+def test_real_macro_slices_give_the_spring(macro, start, length):
+    x, F = macro
+    if start + length > x.size:
+        pytest.skip("the recording is shorter than this slice")
+    est = estimate_trace(x[start : start + length], F[start : start + length], temperature_K=0)
+    assert est.quality == "ok" and est.n_slips >= 20
+    assert est.k_exp_N_m == pytest.approx(SPRING_N_M, rel=0.10)
+
+
+@pytest.mark.parametrize("noise_nN", [2e7, 2e8])  # about one and ten drops per sample
+def test_real_macro_buried_in_noise_is_refused(macro, noise_nN):
+    x, F = macro
+    F = F[:50_000] + np.random.default_rng(0).normal(0.0, noise_nN, 50_000)
+    est = estimate_trace(x[:50_000], F, temperature_K=0)
+    assert est.quality != "ok"
+    assert np.isnan(est.k_exp_N_m) and np.isnan(est.K_N_m) and np.isnan(est.U0_eV)
