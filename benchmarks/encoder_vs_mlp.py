@@ -27,19 +27,15 @@ import argparse
 import json
 import platform
 import time
-from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from stickslip.conditions import Conditions
-from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.classical.baseline import five_line_estimate
+from stickslip.estimators.classical.baseline import FiveLineEstimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.modelfile import load_line_model
-from stickslip.estimators.table import TARGETS, ResultTable
+from stickslip.estimators.table import ResultTable
 from stickslip.estimators.window.estimator import WindowEstimator
 from stickslip.estimators.window.modelfile import load_model, save_model
 from stickslip.estimators.window.randomised import randomised_window_set, split_by_group
@@ -49,26 +45,9 @@ from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators.bench import MATERIALS, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
 from stickslip.traces.dataset import concat_datasets, dataset_traces, load_dataset
-from stickslip.traces.trace import Trace
 
 ROOT = Path(__file__).resolve().parents[1]
 LAB = ROOT / "build" / "lab-bench"
-
-
-class FiveLineEstimator(TraceEstimator):
-    """The five-line baseline (:func:`five_line_estimate`) behind the estimator interface
-    (as in lab_bench.py)."""
-
-    name = "five-line"
-    kind = "baseline"
-
-    def estimate(self, traces: Sequence[Trace], conditions: Sequence[Conditions]
-                 ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
-        out: list[dict[str, Any] | str] = []
-        for t, c in zip(traces, conditions, strict=True):
-            est = five_line_estimate(t.x_nm, t.force_nN, c.lattice_nm)
-            out.append({k: float(est[k][0]) for k in TARGETS})
-        return out, []
 
 
 def dr_window_model(train, work: Path, recipe: str, epochs: int, replicas: int):

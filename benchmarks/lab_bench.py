@@ -26,21 +26,18 @@ import argparse
 import json
 import platform
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from stickslip.conditions import Conditions
 from stickslip.diagnostics.calibration import reliability, reliability_plot
-from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.classical.baseline import five_line_estimate
+from stickslip.estimators.classical.baseline import FiveLineEstimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.modelfile import load_line_model
 from stickslip.estimators.line.training import LineTrainConfig
-from stickslip.estimators.table import TARGETS, ResultTable
+from stickslip.estimators.table import ResultTable
 from stickslip.estimators.window.estimator import WindowEstimator
 from stickslip.jobs.cache import CLEAN_TEST_SEED, LAB_MLP_SEED, clean_window_model, sweep_if_missing
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
@@ -48,24 +45,8 @@ from stickslip.simulators.bench import MATERIALS, BenchConfig, bench_if_missing,
 from stickslip.simulators.instrument import EffectsMixture, InstrumentEffects, apply_instrument
 from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
 from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
-from stickslip.traces.trace import Trace
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-class FiveLineEstimator(TraceEstimator):
-    """The five-line baseline (:func:`five_line_estimate`) behind the estimator interface."""
-
-    name = "five-line"
-    kind = "baseline"
-
-    def estimate(self, traces: Sequence[Trace], conditions: Sequence[Conditions]
-                 ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
-        out: list[dict[str, Any] | str] = []
-        for t, c in zip(traces, conditions, strict=True):
-            est = five_line_estimate(t.x_nm, t.force_nN, c.lattice_nm)
-            out.append({k: float(est[k][0]) for k in TARGETS})
-        return out, []
 
 
 def window_model(work: Path, recipe: str, epochs: int):

@@ -48,9 +48,7 @@ def main() -> None:
     if args.threads:
         numba.set_num_threads(args.threads)
 
-    from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
-    from stickslip.simulators.config import warmup_nm_for
-    from stickslip.simulators.sweep import sweep_table
+    from stickslip.simulators import PhysicalSettings, SweepConfig, simulate
 
     print(f"machine: {machine()}")
     t0 = time.perf_counter()
@@ -74,16 +72,10 @@ def main() -> None:
     print(f"numpy reference (vectorised over trajectories): {steps / dt:.3g} particle-steps/s")
 
     cfg = SweepConfig(n=args.n, seed=0)
-    table = sweep_table(cfg)
     ph = cfg.physics
-    warm = warmup_nm_for(table["U0_eV"], table["K_N_m"], table["lattice_nm"], ph.warmup_nm)
-    total_steps = float(np.sum((warm + ph.length_nm) / (ph.velocity_nm_per_s * ph.dt_s)))
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        run_sweep(cfg, os.path.join(tmp, "sweep.h5"), progress=False)
-        wall = time.perf_counter() - t0
+    total_steps, travel, wall = time_sweep(cfg)
     print(f"paper dataset: {args.n} trajectories, {total_steps:.3g} particle-steps "
-          f"(mean travel {np.mean(warm) + ph.length_nm:.2f} nm incl. warm-up)")  # fmt: skip
+          f"(mean travel {travel:.2f} nm incl. warm-up)")  # fmt: skip
     print(f"paper dataset wall time: {wall:.1f} s  ->  {total_steps / wall:.3g} particle-steps/s")
     equiv = args.n * 12.0 / (ph.velocity_nm_per_s * ph.dt_s)
     print(f"  (12 nm per trajectory, {equiv:.3g} particle-steps, would take "
@@ -92,14 +84,30 @@ def main() -> None:
     print(f"peak memory (max RSS): {peak:.0f} MiB")
 
 
+def time_sweep(cfg) -> tuple[float, float, float]:
+    """Run the sweep ``cfg`` into a temporary file: its particle-steps, its trajectories'
+    mean travel (nm, warm-up included) and the wall time (s)."""
+    from stickslip.simulators import run_sweep
+    from stickslip.simulators.config import warmup_nm_for
+    from stickslip.simulators.sweep import sweep_table
+
+    table = sweep_table(cfg)
+    ph = cfg.physics
+    warm = warmup_nm_for(table["U0_eV"], table["K_N_m"], table["lattice_nm"], ph.warmup_nm)
+    total_steps = float(np.sum((warm + ph.length_nm) / (ph.velocity_nm_per_s * ph.dt_s)))
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        run_sweep(cfg, os.path.join(tmp, "sweep.h5"), progress=False)
+        wall = time.perf_counter() - t0
+    return total_steps, float(np.mean(warm) + ph.length_nm), wall
+
+
 def bench_gpu(backend: str, n_paper: int, n_rate: int) -> None:
     """Kernel rate and the paper dataset's wall time on the CUDA device."""
     from numba.core import config as numba_config
 
-    from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
-    from stickslip.simulators.config import warmup_nm_for
+    from stickslip.simulators import PhysicalSettings, SweepConfig, simulate
     from stickslip.simulators.cuda import cuda_available, device_name
-    from stickslip.simulators.sweep import sweep_table
 
     if numba_config.ENABLE_CUDASIM:
         print(f"backend {backend}: the CUDA simulator is on; it is not a device, nothing timed")
@@ -121,15 +129,7 @@ def bench_gpu(backend: str, n_paper: int, n_rate: int) -> None:
     print(f"kernel, {n_rate} trajectories x {steps / n_rate:.3g} steps: {dt:.2f} s, "
           f"{steps / dt:.3g} particle-steps/s")  # fmt: skip
 
-    cfg = SweepConfig(n=n_paper, seed=0, backend=backend)
-    table = sweep_table(cfg)
-    ph = cfg.physics
-    warm = warmup_nm_for(table["U0_eV"], table["K_N_m"], table["lattice_nm"], ph.warmup_nm)
-    total_steps = float(np.sum((warm + ph.length_nm) / (ph.velocity_nm_per_s * ph.dt_s)))
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        run_sweep(cfg, os.path.join(tmp, "sweep.h5"), progress=False)
-        wall = time.perf_counter() - t0
+    total_steps, _, wall = time_sweep(SweepConfig(n=n_paper, seed=0, backend=backend))
     print(f"paper dataset: {n_paper} trajectories, {total_steps:.3g} particle-steps")
     print(f"paper dataset wall time: {wall:.1f} s  ->  {total_steps / wall:.3g} particle-steps/s")
 

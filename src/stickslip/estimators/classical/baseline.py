@@ -6,8 +6,15 @@ median positive pixel slope, then eta and K by the T = 0 inversion of PHYSICS.md
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
+from stickslip.conditions import Conditions
+from stickslip.estimators.base import TraceEstimator
+from stickslip.estimators.table import TARGETS
+from stickslip.traces.trace import Trace
 from stickslip.units import EV_TO_NN_NM
 
 
@@ -27,3 +34,18 @@ def five_line_estimate(
         "K_N_m": k_exp * (1 + eta) / eta,
         "eta": eta,
     }
+
+
+class FiveLineEstimator(TraceEstimator):
+    """The five-line baseline (:func:`five_line_estimate`) behind the estimator interface."""
+
+    name = "five-line"
+    kind = "baseline"
+
+    def estimate(self, traces: Sequence[Trace], conditions: Sequence[Conditions]
+                 ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
+        out: list[dict[str, Any] | str] = []
+        for t, c in zip(traces, conditions, strict=True):
+            est = five_line_estimate(t.x_nm, t.force_nN, c.lattice_nm)
+            out.append({k: float(est[k][0]) for k in TARGETS})
+        return out, []
