@@ -109,8 +109,10 @@ def _rows_done(part) -> int:
 def test_ctrl_c_stops_soon_keeps_rows_and_prints_resume_command(tmp_path):
     out = tmp_path / "s.h5"
     part = sweep_mod.partial_path(out)
-    # 0.5 nm of travel per trajectory: a default call (64 on 2 threads) lasts ~0.1 s
-    args = ["simulate", "--n", "4096", "--seed", "5", "--velocity", "60", "--length", "0.25",
+    # 0.5 nm of travel per trajectory: a default call (64 on 2 threads) lasts ~0.1 s, the
+    # whole sweep tens of seconds, so that the interrupt lands while it runs
+    n = 16384
+    args = ["simulate", "--n", str(n), "--seed", "5", "--velocity", "60", "--length", "0.25",
             "--warmup", "0.25", "--pixels", "8", "--no-progress", "--out", str(out)]  # fmt: skip
     code = "from stickslip.cli.main import main; main()"
     proc = subprocess.Popen([sys.executable, "-c", code, *args], stderr=subprocess.PIPE,
@@ -119,6 +121,7 @@ def test_ctrl_c_stops_soon_keeps_rows_and_prints_resume_command(tmp_path):
         deadline = time.monotonic() + 180  # numba may compile first
         while _rows_done(part) == 0 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
+        assert proc.poll() is None, "the sweep ended before any row was seen written"
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
         lines, stop_s = [], float("inf")
@@ -136,8 +139,8 @@ def test_ctrl_c_stops_soon_keeps_rows_and_prints_resume_command(tmp_path):
     assert "Traceback" not in stderr
     last = stderr.strip().splitlines()[-1]
     done = int(read_done(part).sum())
-    assert 0 < done < 4096
+    assert 0 < done < n
     resume = shlex.join(["stickslip", *args, "--resume"])
-    assert last == (f"stickslip: error: interrupted: {done} of 4096 trajectories kept in "
+    assert last == (f"stickslip: error: interrupted: {done} of {n} trajectories kept in "
                     f"{part}; continue with: {resume}")  # fmt: skip
     assert not out.exists()

@@ -99,6 +99,18 @@ def test_pair_interval_is_the_mean_of_the_rows_intervals():
     assert pair_friction(t, {"F_mean_nN": None}) == {}
 
 
+def test_with_the_models_own_std_the_pair_leaves_the_offset_term_out():
+    # rows whose <F> intervals carry an offset prior (wide) and the model's std (narrow)
+    t = {"F_mean_nN": 1.0, "F_mean_nN_std": 0.3, "F_mean_nN_lo95": 0.45, "F_mean_nN_hi95": 1.55,
+         "F_model_std_nN": 0.02}
+    r = {"F_mean_nN": 2.0, "F_mean_nN_std": 0.3, "F_mean_nN_lo95": 1.45, "F_mean_nN_hi95": 2.55,
+         "F_model_std_nN": 0.04}  # fmt: skip
+    p = pair_friction(t, r)
+    assert p[f"{PAIR}_std"] == pytest.approx(0.03)
+    assert p[f"{PAIR}_hi95"] - p[PAIR] == pytest.approx(1.959964 * 0.03, rel=1e-5)
+    assert p[PAIR] - p[f"{PAIR}_lo68"] == pytest.approx(0.994458 * 0.03, rel=1e-5)
+
+
 def test_only_one_trace_and_one_retrace_of_a_line_pair():
     scan, _ = synthetic_map(lines=2)
     traces = map_to_traces(scan)

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any, Protocol, runtime_checkable
 
 from stickslip.conditions import GRAPHITE, Conditions, Reference, resolve
-from stickslip.estimators.domain import assess
+from stickslip.estimators.domain import ETA_WINDOW, assess
 from stickslip.estimators.table import (
     OK,
     ResultTable,
@@ -87,6 +87,10 @@ class TraceEstimator:
     #: (``in_domain``, ``domain_score``, ``domain_reason``; :mod:`stickslip.estimators.domain`)
     #: and widens the intervals of rows out of domain.
     domain_verdict: bool = True
+    #: The least estimate of eta the verdict keeps in domain: the trained window's edge,
+    #: or a little above it for models that cannot report an eta below their window
+    #: (:data:`~stickslip.estimators.domain.ETA_EDGE`).
+    eta_edge: float = ETA_WINDOW[0]
 
     def input_refusal(self, trace: Trace) -> str | None:
         """Why a trace gets no estimate before the estimator sees it, or None.
@@ -158,5 +162,5 @@ class TraceEstimator:
             table.rows.append(row)
         if self.domain_verdict:
             assess(table.rows, [t.x_nm for t in traces], [t.force_nN for t in traces],
-                   [c.lattice_nm for c in conds])  # fmt: skip
+                   [c.lattice_nm for c in conds], eta_edge=self.eta_edge)  # fmt: skip
         return table

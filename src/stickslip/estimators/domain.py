@@ -37,6 +37,14 @@ estimator:
    the estimate's own uncertainty (the window is missed when the whole 95 % interval,
    else ``eta +- 2 eta_std``, else the value, lies outside it) -- ``"eta below the
    trained window"`` (smooth sliding, or a barely bistable contact) or ``"... above"``;
+   and, for learned estimators (``eta_edge`` of :func:`assess`), the estimate itself at
+   least :data:`ETA_EDGE`, a little inside the window's lower edge -- ``"eta at the
+   edge of the trained window"``. Near eta = 1 stick-slip
+   fades into smooth sliding: the slips shrink to nothing, and a model trained on eta
+   >= 1.2 maps a smooth (eta < 1) line onto the edge of its window (the bundled line
+   model gives eta 1.15-1.45 for most of them), where it also puts weak stick-slip, so
+   an estimate there cannot say which of the two the line is (the classical
+   estimator inverts the slips and can report eta < 1.2, so it is held to the window);
 5. for estimators that give one: ``domain_embedding`` (a column of the row), the
    distance of the line from the estimator's training lines in units of its limit
    (the whole-line CNN: Mahalanobis distance of its pooled features from those of
@@ -70,6 +78,9 @@ from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missi
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
 ETA_WINDOW = (1.2, 40.0)
+#: Estimates of eta below this are too close to the window's lower edge to rule out
+#: smooth sliding (tuned on the seed-1 sets of ``benchmarks/domain.py``).
+ETA_EDGE = 1.45
 MIN_SLIPS = 2
 MAX_RISE_FRACTION = 0.25
 MIN_SPACING = 0.8  # lattice spacings
@@ -232,11 +243,11 @@ def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
     return eta, eta
 
 
-def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[str, Any]
-                 ) -> dict[str, float]:  # fmt: skip
+def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[str, Any],
+                 eta_edge: float = ETA_WINDOW[0]) -> dict[str, float]:  # fmt: skip
     """Each check of trace ``i`` (:data:`CHECKS`) as statistic / limit: fails above 1.
     A check that cannot be made (no eta, fewer than two slips for the spacing) is left
-    out."""
+    out; ``eta_edge`` is the least estimate of eta kept in domain."""
     nd, nr = int(checks.n_drops[i]), int(checks.n_rises[i])
     out = {"slips": MIN_SLIPS / max(nd, 0.5)}
     if nr > 0:
@@ -245,8 +256,12 @@ def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[st
     if np.isfinite(q25) and q25 > 0 and lattice_nm > 0:
         out["spacing"] = MIN_SPACING * lattice_nm / q25
     lo, hi = eta_bounds(row)
+    eta = _number(row, "eta")
     if np.isfinite(hi):
         out["eta_low"] = ETA_WINDOW[0] / hi if hi > 0 else np.inf
+    if eta_edge > ETA_WINDOW[0] and np.isfinite(eta):
+        edge = eta_edge / eta if eta > 0 else np.inf
+        out["eta_low"] = max(out.get("eta_low", 0.0), edge)
     if np.isfinite(lo):
         out["eta_high"] = lo / ETA_WINDOW[1]
     emb = _number(row, "domain_embedding")
@@ -256,7 +271,7 @@ def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[st
 
 
 def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
-           row: Mapping[str, Any]) -> str:  # fmt: skip
+           row: Mapping[str, Any], eta_edge: float = ETA_WINDOW[0]) -> str:  # fmt: skip
     """The plain reason a check of trace ``i`` failed."""
     nd, nr = int(checks.n_drops[i]), int(checks.n_rises[i])
     if check == "slips":
@@ -275,7 +290,11 @@ def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
                 f"a = {lattice_nm:g} nm)")  # fmt: skip
     eta = _number(row, "eta")
     if check == "eta_low":
-        return f"eta below the trained window ({eta:.3g} < {ETA_WINDOW[0]:g})"
+        hi = eta_bounds(row)[1]
+        if np.isfinite(hi) and hi < ETA_WINDOW[0]:
+            return f"eta below the trained window ({eta:.3g} < {ETA_WINDOW[0]:g})"
+        return (f"eta at the edge of the trained window ({eta:.3g} < {eta_edge:g}): "
+                "smooth sliding not ruled out")  # fmt: skip
     if check == "eta_high":
         return f"eta above the trained window ({eta:.3g} > {ETA_WINDOW[1]:g})"
     emb = _number(row, "domain_embedding")
@@ -292,6 +311,9 @@ def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> No
     model defines it (without a 68 % interval, the std grows by ``factor``).
     """
     # plain floats and math: this runs on every out-of-domain row
+    model_sd = _number(row, "F_model_std_nN")  # the pairs' std (estimators.pairs)
+    if math.isfinite(model_sd):
+        row["F_model_std_nN"] = factor * model_sd
     for k in WIDENED:
         m = _number(row, k)
         if not math.isfinite(m):
@@ -318,13 +340,15 @@ def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> No
 
 def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
            force_nN: Sequence[np.ndarray], lattice_nm: Sequence[float],
-           widen: bool = True) -> None:  # fmt: skip
+           widen: bool = True, eta_edge: float = ETA_WINDOW[0]) -> None:  # fmt: skip
     """Add ``in_domain``, ``domain_score``, ``domain_reason`` to every row (in place) and,
     with ``widen``, widen the intervals of the rows out of domain (:func:`widen_row`).
 
     ``rows[i]`` is the row of the trace ``(x_nm[i], force_nN[i])`` read at lattice
     ``lattice_nm[i]``; rows without an estimate (``quality`` other than ``ok``) are out
-    of domain with the reason ``"no estimate: <quality>"``.
+    of domain with the reason ``"no estimate: <quality>"``. ``eta_edge``: the least
+    estimate of eta in domain (:data:`ETA_EDGE` for learned models, which cannot report
+    an eta below their window).
     """
     todo = [i for i, r in enumerate(rows) if r.get("quality") == OK]
     checks = trace_checks([x_nm[i] for i in todo], [force_nN[i] for i in todo])
@@ -334,12 +358,13 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
                      domain_reason=f"no estimate: {r.get('quality')}")  # fmt: skip
     for j, i in enumerate(todo):
         row, a = rows[i], float(lattice_nm[i])
-        ratios = check_ratios(checks, j, a, row)
+        ratios = check_ratios(checks, j, a, row, eta_edge)
         failed = sorted((k for k, v in ratios.items() if v > 1.0),
                         key=lambda k: (-ratios[k], CHECKS.index(k)))  # fmt: skip
         row["in_domain"] = not failed
         row["domain_score"] = float(min(max(ratios.values()), MAX_SCORE))
-        row["domain_reason"] = "; ".join(reason(k, checks, j, a, row) for k in failed) or None
+        row["domain_reason"] = "; ".join(reason(k, checks, j, a, row, eta_edge)
+                                         for k in failed) or None  # fmt: skip
         if failed and widen:
             widen_row(row)
 

@@ -20,7 +20,11 @@ friction loop's ``(trace - retrace) / 2`` of the raw images, with each row's est
 place of the raw mean. Both rows keep their own ``F_mean_nN`` and get the pair's
 columns.
 
-Uncertainty. The pair's ``friction_pair_nN_std`` and its 68 / 95 % intervals are the
+Uncertainty. Where the rows carry ``F_model_std_nN`` (the line model's <F> error
+without the offset term its single-row interval holds, :mod:`stickslip.estimators.
+offsets`), the pair's std is the mean of the two and its intervals are Gaussian about
+the pair's value: the offset cancels in the pair, so its interval is the model's alone.
+Otherwise the pair's ``friction_pair_nN_std`` and its 68 / 95 % intervals are the
 means of the two rows' (``(std_t + std_r) / 2``, ``(lo_t + lo_r) / 2``, ...): the
 interval of the mean of two fully correlated errors. Independent errors would give
 intervals ~1/sqrt(2) as wide; but the rows share the line, the substrate, the model and
@@ -36,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from stickslip.estimators.calibration import gaussian_z
 from stickslip.estimators.table import BOUNDS, is_missing
 from stickslip.traces.formats.common import RETRACE, TRACE
 from stickslip.traces.trace import Trace
@@ -47,6 +52,10 @@ PAIR_COLUMNS = (PAIR, f"{PAIR}_std", *(f"{PAIR}_{b}" for b in BOUNDS), OFFSET, "
 #: Rows of traces in volts (no calibration) carry their friction as ``F_mean_V``: their
 #: pair's columns are ``friction_pair_V ...``, ``offset_pair_V``.
 UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
+#: the std of a row's <F> error without the offset term (line model with an offset
+#: prior, :mod:`stickslip.estimators.offsets`)
+MODEL_STD = "F_model_std_nN"
+Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)
 
 
 def pair_key(trace: Trace) -> tuple[Hashable, ...] | None:
@@ -93,6 +102,14 @@ def pair_friction(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
     ft, fr = _value(trace_row, friction), _value(retrace_row, friction)
     pair, offset = f"friction_pair_{unit}", f"offset_pair_{unit}"
     out = {pair: 0.5 * (ft + fr), offset: 0.5 * (ft - fr)}
+    mt, mr = _value(trace_row, MODEL_STD), _value(retrace_row, MODEL_STD)
+    if unit == "nN" and np.isfinite(mt) and np.isfinite(mr):
+        # the rows' <F> intervals carry the offset prior; the pair cancels the offset
+        sd = 0.5 * (mt + mr)
+        out[f"{pair}_std"] = sd
+        for b, z in zip(BOUNDS, (-Z68, Z68, -Z95, Z95), strict=True):
+            out[f"{pair}_{b}"] = out[pair] + z * sd
+        return out
     for suffix in ("std", *BOUNDS):
         key = f"{friction}_{suffix}"
         vt, vr = _value(trace_row, key), _value(retrace_row, key)

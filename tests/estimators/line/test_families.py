@@ -13,6 +13,7 @@ from stickslip.estimators.line.families import (
     draw_family_lines,
 )
 from stickslip.estimators.line.modelfile import load_line_model
+from stickslip.estimators.offsets import OffsetPrior
 from stickslip.simulators import PhysicalSettings, simulate
 from stickslip.simulators import effects as fx
 from stickslip.simulators.config import ParameterRange
@@ -75,3 +76,10 @@ def test_calibration_on_families_refits_only_the_spread(clean):
     fc = report["family_calibration"]
     assert "mains" not in fc["families"] and fc["seed"] == 11 and fc["draws"] == 3
     assert fc["n_trajectories"] == clean.n
+    # the offset term comes from the documented crosstalk range even where the prior
+    # leaves crosstalk out (leave-one-family-out): it is not fitted
+    no_xt = copy.deepcopy(shipped)
+    calibrate_on_families(no_xt, clean, FamilyCalibration(
+        prior=fx.NuisancePrior().without("crosstalk"), seed=11, draws=1))  # fmt: skip
+    assert no_xt.offset == ens.offset == OffsetPrior.from_family(fx.Crosstalk())
+    assert fc["offset"] == ens.offset.to_dict()

@@ -34,6 +34,7 @@ from stickslip.estimators.line.training import (
     training_effects,
     validation_set,
 )
+from stickslip.estimators.offsets import OffsetPrior
 from stickslip.estimators.window.modelfile import ModelFileError, load_model
 from stickslip.simulators import PhysicalSettings, simulate
 from stickslip.simulators.instrument import LAB, EffectsMixture
@@ -100,6 +101,20 @@ def test_line_model_file_round_trip_and_damage(tmp_path):
     X = line_inputs([np.linspace(0, 3, 300)], ens.spec)
     C = torch.zeros(1, 2)
     np.testing.assert_allclose(back.predict(X, C)[0], ens.predict(X, C)[0], rtol=1e-6)
+    assert back.offset is None
+    ens.offset = OffsetPrior(p=0.3, mean_nN=(0.01, 0.4))
+    assert load_line_model(save_line_model(ens, tmp_path / "o.pt", (16, 32, 48, 64), {}, {},
+                                           {})).offset == ens.offset  # fmt: skip
+    # the offset term widens the <F> interval only, and keeps the model's own std apart
+    lines = [np.linspace(0, 3, 300)]
+    with_off = predict_lines(ens, lines, np.full(1, 0.246), np.full(1, 60.0), np.full(1, 1.5))
+    ens.offset = None
+    without = predict_lines(ens, lines, np.full(1, 0.246), np.full(1, 60.0), np.full(1, 1.5))
+    wide = with_off.hi95["F_mean_nN"] - with_off.lo95["F_mean_nN"]
+    narrow = without.hi95["F_mean_nN"] - without.lo95["F_mean_nN"]
+    assert np.all(wide > narrow)
+    np.testing.assert_allclose(with_off.F_model_std, without.std["F_mean_nN"])
+    np.testing.assert_allclose(with_off.hi95["K_N_m"], without.hi95["K_N_m"])
     bad = tmp_path / "bad.pt"
     bad.write_bytes(path.read_bytes()[:500])
     with pytest.raises(ModelFileError, match="bad.pt"):
@@ -164,17 +179,9 @@ def test_flat_substrate_reads_the_substrate_columns():
     assert flat_substrate({"U0_eV": np.ones(3)}).all()
 
 
-def test_training_report_separates_pristine_and_corrupted_validation():
+def test_training_report_separates_pristine_and_corrupted_validation(sawtooth_lines):
     # hand-made sawtooth lines (no simulation): checks the plumbing, not the accuracy
-    rng = np.random.default_rng(1)
-    n, x = 120, np.arange(300) * LineSpec().pixel_nm
-    a = rng.choice([0.246, 0.28], n)
-    K, U0 = rng.uniform(2, 20, n), rng.uniform(0.5, 3, n)
-    force = np.array([k * a_ * ((x / a_) % 1.0) for k, a_ in zip(K, a, strict=True)])
-    params = {"U0_eV": U0, "K_N_m": K, "F_mean_nN": force.mean(axis=1), "lattice_nm": a,
-              "velocity_nm_per_s": np.full(n, 60.0),
-              "mod_amplitude": np.where(np.arange(n) % 2 == 0, 0.0, 0.2),
-              "defect_count": np.zeros(n, int)}  # fmt: skip
+    force, x, params = sawtooth_lines(120, 300, 1)
     cfg = LineTrainConfig(members=1, epochs=1, batch_size=32, val_fraction=0.25, mse_epochs=1,
                           spread_classes=None)  # one scale row: strata weigh equally
     _, report = train_line_ensemble(force, x, params, cfg, LineSpec(crop=200), progress=False)

@@ -88,7 +88,10 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     kseg = segs[:, sl.SEG_SLOPE]
     segok = kseg > 0
     if good.sum() < MIN_SLIPS - 1 or segok.sum() < 2 or ns < MIN_SLIPS:
-        out[STATUS] = 1
+        # a force that cycles well above the noise without slips to fit: smooth sliding
+        span = sl._force_range(x, F)
+        smooth = span >= 10.0 * sigma and sl._cycles(x, F) >= 2 * MIN_SLIPS
+        out[STATUS] = 2 if smooth else 1
         return
     # a refusal carries no numbers: slopes between slips that noise may have made up
     if sigma > NOISE_TO_DROP_MAX * np.median(drops[good]):
@@ -112,10 +115,14 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
     if np.isnan(K) or np.isnan(Fmax):
         out[STATUS] = 4
         return
+    eta = 2.0 * np.pi * Fmax / (a * K)
+    if eta < 1.0:  # no PT stick-slip has this peak and slope: the drops are not slips
+        out[STATUS] = 2
+        return
     scale = Fmax / F_peak  # thermal correction, applied to every slip's peak
     out[U0] = a * Fmax / np.pi / EV_TO_NN_NM
     out[K_] = K
-    out[ETA] = 2.0 * np.pi * Fmax / (a * K)
+    out[ETA] = eta
     out[U0_STD] = _spread(a * peaks * scale / np.pi / EV_TO_NN_NM)
     out[K_STD] = _spread(Kseg)
     # per-segment eta: each stick's own K with the mean F_max

@@ -31,13 +31,15 @@ from numba import njit
 MIN_FIT_SAMPLES = 3  # straight line
 MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
 NOISE_SIGMAS = 5.0  # detection threshold on D_w in units of its noise
-RISE_FACTOR = 3.0  # ... and in units of the median |D_w| (typical stick rise)
+RISE_FACTOR = 2.0  # ... and in units of the median |D_w| (typical stick rise)
 OUTLIER_SIGMAS = 4.0
 SPIKE_FACTOR = 2.0  # a spike stands out of its neighbours by this times their difference
 STICK_NOISE_RATIO = 0.7  # stick-only noise below this fraction of the overall: slips inflated it
 CLIP_SIGMAS = 3.5  # second differences beyond this (in MAD units) are slips, not noise
 DEPTH_QUANTILE = 75.0  # depth percentile of the events that must reach half the force range
 BEND_FRACTION = 0.15  # guard-pixel deficit, in units of the fitted rise, that flags a bend
+BLOCKS_PER_CYCLE = 8  # the noise of D_w is measured on w-blocks only up to cycle / this
+FINE_CYCLE = 128  # ... on lines of fewer samples per cycle; finer ones on every w-block
 
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
@@ -215,15 +217,54 @@ def _cumsum0(G: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, buf: np.ndarray) -> int:
-    """Drops of ``D_w`` below ``-max(noise, RISE_FACTOR median|D_w|)`` into ``buf``."""
+def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: int,
+                  buf: np.ndarray) -> int:  # fmt: skip
+    """Drops of ``D_w`` below ``-max(noise, RISE_FACTOR median|D_w|)`` into ``buf``.
+
+    Correlated noise (1/f, filtered, interpolated) is larger at scale ``w`` than white
+    noise: it is measured on ``w``-blocks up to ``w_noise`` samples (blocks that resolve
+    a stick-slip cycle, whose second differences are mostly noise), and extrapolated as
+    white beyond (blocks of a quarter cycle are all signal: measured there, the "noise"
+    would be the sawtooth itself); ``w_noise = -1``: on ``w``-blocks (finely sampled
+    lines); 0: white noise only.
+    """
     n = G.size
     D = _window_diff(G, w)
     Dv = D[w - 1 : n - w]
     floor = RISE_FACTOR * np.median(np.abs(Dv)) if Dv.size > 0 else 0.0
-    # correlated noise (1/f, filtered, interpolated) is larger at scale w than white
-    noise_w = max(sigma * np.sqrt(2.0 / w), _scale_noise(C, w))
+    noise_w = sigma * np.sqrt(2.0 / w)
+    if w_noise >= 1:
+        wm = min(w, w_noise)
+        noise_w = max(noise_w, _scale_noise(C, wm) * np.sqrt(wm / w))
+    elif w_noise < 0:  # every block size measures the noise
+        noise_w = max(noise_w, _scale_noise(C, w))
     return _events(D, max(NOISE_SIGMAS * noise_w, floor), buf)
+
+
+@njit(cache=True, error_model="numpy")
+def _cycles(x: np.ndarray, G: np.ndarray) -> int:
+    """Stick-slip cycles of a trace: falls of the linearly detrended force from above
+    its 75th to below its 25th percentile (a Schmitt trigger, blind to noise smaller
+    than half the force range)."""
+    n = G.size
+    if n < 4:
+        return 0
+    xm = np.mean(x)
+    Gm = np.mean(G)
+    sxx = np.sum((x - xm) ** 2)
+    b = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
+    r = G - b * (x - xm)
+    lo = np.percentile(r, 25.0)
+    hi = np.percentile(r, 75.0)
+    high = r[0] >= hi
+    k = 0
+    for i in range(1, n):
+        if high and r[i] <= lo:
+            k += 1
+            high = False
+        elif not high and r[i] >= hi:
+            high = True
+    return k
 
 
 @njit(cache=True, error_model="numpy")
@@ -261,6 +302,23 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     span = _force_range(x, G)
     C = _cumsum0(G)
     buf = np.empty((n, 4))
+    # blocks of up to 1/BLOCKS_PER_CYCLE of a cycle measure the noise (``_scale_events``)
+    w_noise = 0
+    # cycles: the Schmitt trigger's count, or the drops at the two finest scales above
+    # white noise where drift or a modulated barrier hide cycles from it
+    nc = _cycles(x, G)
+    for w in (1, 2):
+        nc = max(nc, _scale_events(G, C, w, sigma, 0, buf))
+    cyc = n / max(nc, 1)
+    if cyc >= FINE_CYCLE:
+        # finely sampled: blocks at every window size stay far below a cycle, and their
+        # noise keeps a smooth (eta < 1) fall, steep at the scale of a block, from
+        # passing for a slip
+        w_noise = -1
+    elif cyc >= BLOCKS_PER_CYCLE:
+        w_noise = 1
+        while 2 * w_noise * BLOCKS_PER_CYCLE <= cyc:
+            w_noise *= 2
     ws = np.empty(64, dtype=np.int64)
     counts = np.zeros(64, dtype=np.int64)
     deep = np.zeros(64, dtype=np.bool_)
@@ -269,7 +327,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     best = -1
     while w <= max(1, n // 32) and ns < 64:
         ws[ns] = w
-        counts[ns] = _scale_events(G, C, w, sigma, buf)
+        counts[ns] = _scale_events(G, C, w, sigma, w_noise, buf)
         k = counts[ns]
         # the larger slips, not all (a multiple-slip trace mixes sizes), span the range
         deep[ns] = k > 0 and np.percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
@@ -287,7 +345,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
                 break
     if best < 0:
         return np.empty((0, 4)), 1, sigma, span
-    k = _scale_events(G, C, ws[best], sigma, buf)
+    k = _scale_events(G, C, ws[best], sigma, w_noise, buf)
     return buf[:k].copy(), int(ws[best]), sigma, span
 
 
@@ -347,8 +405,13 @@ def _robust_fit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg
 
 @njit(cache=True, error_model="numpy")
 def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
-                 row: np.ndarray) -> None:  # fmt: skip
-    """Fill one row of the segment table (NaN slope if too short)."""
+                 trim: int, row: np.ndarray) -> None:  # fmt: skip
+    """Fill one row of the segment table (NaN slope if too short).
+
+    The slope is fitted on the rising part without its last ``trim`` samples: before a
+    slip the branch bends over (vertical tangent at the T = 0 instability), which a
+    straight line does not follow.
+    """
     row[:] = np.nan
     row[SEG_START] = lo
     row[SEG_END] = hi
@@ -368,6 +431,8 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
             hi_r -= 1
     if hi_r - lo + 1 < MIN_FIT_SAMPLES:
         hi_r = hi
+    if hi_r - trim - lo + 1 >= MIN_FIT_SAMPLES:
+        hi_r = min(hi_r, hi - trim)
     b0, b1, _ = _robust_fit(x, F, lo, hi_r, xref, 1, sigma, mask[: hi_r - lo + 1].copy())
     row[SEG_SLOPE] = b1
     row[SEG_F_LO] = b0 + b1 * (x[lo] - xref)
@@ -472,9 +537,11 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
         # one guard sample at each end, against partly averaged pixels
         lo = start + 1 if k > 0 else start
         hi = end - 1 if k < ne else end
-        _fit_segment(x, F, lo, hi, tol, segs[k])
+        _fit_segment(x, F, lo, hi, tol, 1 if k < ne else 0, segs[k])
         if k < ne:
-            start = int(events[k, 1]) + w
+            # a slip smeared by the detector's bandwidth (a run of D_w longer than the
+            # window) relaxes after its steepest part for as long again
+            start = int(events[k, 1]) + w + max(0, int(events[k, 1] - events[k, 0]) + 1 - w)
     for k in range(ne):
         slips[k, SLIP_CENTRE] = events[k, 2]
         pre, post = segs[k], segs[k + 1]

@@ -47,6 +47,7 @@ from torch import nn
 from stickslip.conditions import GRAPHITE, Reference
 from stickslip.estimators.calibration import SHAPE_LEVELS, SpreadClasses, gaussian_z
 from stickslip.estimators.mapping import to_reference
+from stickslip.estimators.offsets import OffsetPrior, offset_half_width
 from stickslip.estimators.window.inference import predict_windows
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.units import eta_from
@@ -271,6 +272,9 @@ class LineEnsemble:
     classes: SpreadClasses | None = None
     exponent: np.ndarray | None = None
     shape: np.ndarray | None = None
+    #: offsets one line cannot tell from friction, added to the single-line <F>
+    #: interval (:mod:`stickslip.estimators.offsets`); None: no such term
+    offset: OffsetPrior | None = None
 
     def z_at(self, level: float) -> np.ndarray:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
@@ -339,6 +343,9 @@ class LinePrediction:
     hi68: dict[str, np.ndarray]
     lo95: dict[str, np.ndarray]
     hi95: dict[str, np.ndarray]
+    #: std of the model's own <F> error, without the offset term (what a trace/retrace
+    #: pair, which cancels the offset, is left with)
+    F_model_std: np.ndarray | None = None
 
 
 def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
@@ -386,7 +393,10 @@ def predict_lines(
         e = h68 / Z68  # std of the Gaussian with this 68 % interval
         if name == "F_mean_nN":
             m = m + np.asarray(trace_mean_nN, float)
-            out.values[name], out.std[name] = m, e
+            out.F_model_std = e
+            h68 = offset_half_width(h68, 0.68, ens.offset)
+            h95 = offset_half_width(h95, 0.95, ens.offset)
+            out.values[name], out.std[name] = m, h68 / Z68
             out.lo68[name], out.hi68[name] = m - h68, m + h68
             out.lo95[name], out.hi95[name] = m - h95, m + h95
             continue

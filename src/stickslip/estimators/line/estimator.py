@@ -11,7 +11,7 @@ import numpy as np
 
 from stickslip.conditions import Conditions
 from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.domain import EmbeddingReference
+from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, TARGETS
@@ -111,6 +111,7 @@ class LineEstimator(TraceEstimator):
     kind = "line"
     intervals = True
     name = "line-cnn"
+    eta_edge = ETA_EDGE  # trained on eta >= 1.2: smooth lines land at the edge
 
     def __init__(self, ensemble: LineEnsemble, source: str = "bundled",
                  embedding_reference: EmbeddingReference | None = None) -> None:  # fmt: skip
@@ -160,6 +161,8 @@ class LineEstimator(TraceEstimator):
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
             for b in BOUNDS:
                 row.update({f"{k}_{b}": float(getattr(pred, b)[k][j]) for k in TARGETS})
+            if pred.F_model_std is not None and self.ensemble.offset is not None:
+                row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
             out[i] = row

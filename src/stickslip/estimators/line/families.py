@@ -38,6 +38,7 @@ from stickslip.estimators.line.training import (
     line_targets,
     training_effects,
 )
+from stickslip.estimators.offsets import OffsetPrior
 from stickslip.simulators import effects as fx
 from stickslip.simulators.instrument import apply_instrument
 from stickslip.traces.dataset import Dataset
@@ -53,6 +54,12 @@ class FamilyCalibration:
     seed : seed of the draws (effects and their realisations).
     draws : independent draws of the effects per trajectory.
     implementation : ``"train"`` (default) or ``"eval"``; evaluation sets use the other.
+    offset : the offsets one line cannot tell from friction, added to the single-line
+        <F> interval (:mod:`stickslip.estimators.offsets`; by default the crosstalk
+        family's documented range, whether or not the prior holds that family: it is
+        not fitted). The calibration then fits the model's <F> error against the
+        friction plus each line's crosstalk mean, what the line shows. None: no such
+        term, and the offsets are left to the fitted calibration.
     training_draws : draws per trajectory of the members' own training effects
         (:func:`~stickslip.estimators.line.training.training_effects`, a fifth of the
         lines left clean, as in training) added to the calibration lines, weighing as
@@ -66,11 +73,15 @@ class FamilyCalibration:
     draws: int = 4
     implementation: str = "train"
     training_draws: int = 0
+    offset: OffsetPrior | None = dataclasses.field(
+        default_factory=lambda: OffsetPrior.from_family(fx.Crosstalk())
+    )
 
     def to_dict(self) -> dict:
         return {"prior": self.prior.to_dict(), "seed": self.seed, "draws": self.draws,
                 "implementation": self.implementation, "training_draws": self.training_draws,
-                "families": list(self.prior.enabled())}  # fmt: skip
+                "families": list(self.prior.enabled()),
+                "offset": None if self.offset is None else self.offset.to_dict()}  # fmt: skip
 
 
 @dataclass
@@ -80,7 +91,8 @@ class FamilyLines:
     ``data`` is a dataset whose force is the recorded one and whose params carry the
     truths (``U0_eV``, ``K_N_m``, ``F_mean_nN`` the contact force's mean) and the
     *stated* conditions (``velocity_nm_per_s``, ``temperature_K``), as an estimator is
-    told them; ``applied`` (n, families) says which family each line got; ``rows`` the
+    told them, and ``offset_nN`` each line's crosstalk mean (the offset one line cannot
+    tell from friction); ``applied`` (n, families) says which family each line got; ``rows`` the
     source trajectory of each line.
     """
 
@@ -106,17 +118,22 @@ def draw_family_lines(clean: Dataset, prior: fx.NuisancePrior, seed: int, draws:
     force = np.asarray(clean.force_nN, float)
     T = p.get("temperature_K", np.full(clean.n, 300.0))
     parts = []
+    offsets = []
     for k in range(draws):
         rng = np.random.default_rng([seed, k])
         d = fx.draw(prior, clean.n, rng, implementation)
-        F, said = fx.apply(d, clean.x_nm, force, p["velocity_nm_per_s"], rng, temperature_K=T)
+        record: dict[str, np.ndarray] = {}
+        F, said = fx.apply(d, clean.x_nm, force, p["velocity_nm_per_s"], rng, temperature_K=T,
+                           record=record)  # fmt: skip
         truth_F = fx.contact_force(d, force).mean(axis=1)
         parts.append((F, said, truth_F, d.applied))
+        offsets.append(record["crosstalk"].mean(axis=1))
     rows = np.tile(np.arange(clean.n), draws)
     params = {k: np.asarray(v)[rows] for k, v in p.items() if np.ndim(v) == 1}
     params["velocity_nm_per_s"] = np.concatenate([s.velocity_nm_per_s for _, s, _, _ in parts])
     params["temperature_K"] = np.concatenate([s.temperature_K for _, s, _, _ in parts])
     params["F_mean_nN"] = np.concatenate([t for _, _, t, _ in parts])
+    params["offset_nN"] = np.concatenate(offsets)
     data = Dataset(np.vstack([F for F, _, _, _ in parts]), clean.x_nm, params,
                    {**clean.attrs, "kind": f"families-{implementation}"})  # fmt: skip
     return FamilyLines(data, np.vstack([a for _, _, _, a in parts]), rows)
@@ -142,9 +159,11 @@ def draw_training_lines(clean: Dataset, seed: int, draws: int = 1) -> FamilyLine
     return FamilyLines(data, np.zeros((rows.size, len(fx.FAMILIES)), bool), rows)
 
 
-def calibration_lines(ens: LineEnsemble, lines: FamilyLines) -> tuple[ValidationSet, np.ndarray]:
+def calibration_lines(ens: LineEnsemble, lines: FamilyLines, offset: bool = False
+                      ) -> tuple[ValidationSet, np.ndarray]:  # fmt: skip
     """The lines as the calibration reads them (mapped, conditioned on the stated
-    velocity) and their targets (:func:`~stickslip.estimators.line.training.line_targets`)."""
+    velocity) and their targets (:func:`~stickslip.estimators.line.training.line_targets`);
+    with ``offset``, the <F> target is the friction plus the line's crosstalk mean."""
     d, spec = lines.data, ens.spec
     p = d.params
     a = p["lattice_nm"]
@@ -152,7 +171,9 @@ def calibration_lines(ens: LineEnsemble, lines: FamilyLines) -> tuple[Validation
     cs = ValidationSet(lines=mapped, C=conditioning(a, p["velocity_nm_per_s"], spec),
                        rows=lines.rows, strata=np.zeros(d.n, int),
                        observed_mean=d.force_nN.mean(axis=1))  # fmt: skip
-    return cs, line_targets(p["U0_eV"], p["K_N_m"], p["F_mean_nN"], a, spec)
+    # with an offset term the model answers for what the line shows: friction + offset
+    F = p["F_mean_nN"] + (p["offset_nN"] if offset and "offset_nN" in p else 0.0)
+    return cs, line_targets(p["U0_eV"], p["K_N_m"], F, a, spec)
 
 
 def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
@@ -167,7 +188,7 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     settings = settings or FamilyCalibration()
     lines = draw_family_lines(clean, settings.prior, settings.seed, settings.draws,
                               settings.implementation)  # fmt: skip
-    cs, Y = calibration_lines(ens, lines)
+    cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None)
     if settings.training_draws:
         mild, Y_mild = calibration_lines(ens, draw_training_lines(clean, settings.seed,
                                                                   settings.training_draws))
@@ -178,6 +199,7 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                                                          mild.observed_mean]))  # fmt: skip
         Y = np.concatenate([Y, Y_mild])
     power = ens.exponent is not None and not np.allclose(ens.exponent, 1.0)
+    ens.offset = settings.offset
     report = calibrate_and_report(ens, cs, Y, ens.classes, power)
     report["family_calibration"] = {**settings.to_dict(), "n_trajectories": clean.n,
                                     "clean_fingerprint": clean.fingerprint()}  # fmt: skip

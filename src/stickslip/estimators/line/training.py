@@ -41,6 +41,19 @@ Within a class the calibrated std is ``c * sd ** gamma`` (:func:`power_fit`: the
 quantile of the error, regressed on the ensemble's own spread), and the calibrated
 lines' standardised errors give the intervals' shape at every level
 (:meth:`~stickslip.estimators.line.ensemble.LineEnsemble.z_at`).
+
+Effect families in training (optional, off by default). With ``families`` set (a
+:class:`~stickslip.simulators.effects.NuisancePrior`), a ``family_fraction`` of the
+non-pristine lines of every training batch carry effects drawn from that prior with the
+``"train"`` implementation of every family (:func:`~stickslip.simulators.effects.draw`
+and :func:`~stickslip.simulators.effects.apply`, as the calibration on the families
+draws them) instead of the detector effects; their truths follow PHYSICS.md: the <F>
+target is the mean of the contact force (:func:`~stickslip.simulators.effects.
+contact_force`: precursor softening lowers it, every other family is an instrument
+artefact) and the conditioning reads the *stated* velocity the draw gives. The
+validation and calibration lines of the run stay as without it (the detector effects):
+a model trained this way is meant to be calibrated on the families afterwards
+(:func:`~stickslip.estimators.line.families.calibrate_on_families`).
 """
 
 from __future__ import annotations
@@ -72,6 +85,7 @@ from stickslip.estimators.line.ensemble import (
 from stickslip.estimators.line.streaming import LineBatches, StreamSettings, batch_loader
 from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
+from stickslip.simulators import effects as fx
 from stickslip.simulators.instrument import (
     LAB,
     EffectsMixture,
@@ -147,9 +161,32 @@ class LineTrainConfig:
     effects: InstrumentEffects | EffectsMixture = field(
         default_factory=lambda: training_effects(TYPICAL_FRACTION)
     )
+    # effect families drawn on a family_fraction of the non-pristine training lines
+    # (None: none, the bundled recipe; see the module notes)
+    families: fx.NuisancePrior | None = None
+    family_fraction: float = 0.5
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """Plain dict of the settings (saved in the model file). Without ``families``
+        neither it nor ``family_fraction`` is written, so a run without families is
+        described as before the option existed; with it, ``families`` is the prior's
+        :meth:`~stickslip.simulators.effects.NuisancePrior.to_dict` (read back with
+        :func:`training_families`)."""
+        d = dataclasses.asdict(self)
+        if self.families is None:
+            del d["families"], d["family_fraction"]
+        else:
+            d["families"] = self.families.to_dict()
+        return d
+
+
+def training_families(train_config: dict) -> tuple[fx.NuisancePrior | None, float]:
+    """The effect-family prior and fraction of a saved training config
+    (:meth:`LineTrainConfig.to_dict`): ``(None, 0.0)`` for a run without families."""
+    prior = train_config.get("families")
+    if prior is None:
+        return None, 0.0
+    return fx.NuisancePrior.from_dict(prior), float(train_config["family_fraction"])
 
 
 def line_targets(U0_eV, K_N_m, F_mean_nN, lattice_nm, spec: LineSpec) -> np.ndarray:
@@ -185,6 +222,43 @@ def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, 
                                       clean_fraction, keep_clean)  # fmt: skip
     X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
     return X, conditioning(lattice_nm, velocity_nm_per_s, spec), observed
+
+
+def prepare_family_batch(force_nN, lattice_nm, velocity_nm_per_s, F_mean_nN, x_nm, spec,
+                         config: LineTrainConfig, rng, crop: int | None,
+                         keep_clean: np.ndarray | None = None):  # fmt: skip
+    """:func:`prepare_batch` with effect families (``config.families``) on a
+    ``config.family_fraction`` of the lines not marked in ``keep_clean``.
+
+    Those lines get a draw of the prior with the ``"train"`` implementation
+    (:func:`~stickslip.simulators.effects.apply`) instead of the detector effects and are
+    conditioned on the stated velocity; the other lines are as in :func:`prepare_batch`.
+    The third value is, per line, the reference the friction target is taken from (the
+    training loop's target is ``F_mean_nN - reference``): the corrupted trace's mean on
+    lines without families, and ``observed + F_mean_nN - contact`` on family lines, where
+    ``contact`` is the mean of the contact force
+    (:func:`~stickslip.simulators.effects.contact_force`, the <F> truth of PHYSICS.md), so
+    that their target is ``contact - observed``.
+    """
+    force_nN = np.asarray(force_nN, float)
+    n = force_nN.shape[0]
+    on = rng.random(n) < config.family_fraction
+    if keep_clean is not None:
+        on &= ~keep_clean
+    lines, reference = corrupt_and_map(force_nN, lattice_nm, x_nm, spec, config.effects, rng,
+                                       config.clean_fraction, keep_clean)  # fmt: skip
+    v = np.array(velocity_nm_per_s, float)
+    sel = np.flatnonzero(on)
+    if sel.size:
+        d = fx.draw(config.families, sel.size, rng, "train")
+        F, said = fx.apply(d, x_nm, force_nN[sel], v[sel], rng)
+        contact = fx.contact_force(d, force_nN[sel]).mean(axis=1)
+        for j, i in enumerate(sel):
+            lines[i] = map_line(x_nm, F[j], lattice_nm[i], spec)
+        v[sel] = said.velocity_nm_per_s
+        reference[sel] = F.mean(axis=1) + np.asarray(F_mean_nN, float)[sel] - contact
+    X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
+    return X, conditioning(lattice_nm, v, spec), reference
 
 
 def flat_substrate(params: dict[str, np.ndarray]) -> np.ndarray:
@@ -462,6 +536,10 @@ def _prepare_rows(
 ) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
     """:func:`prepare_batch` of training rows (run in the loader's workers)."""
     a, v = params["lattice_nm"][rows], params["velocity_nm_per_s"][rows]
+    if config.families is not None:
+        return prepare_family_batch(force_nN, a, v, params["F_mean_nN"][rows], x_nm, spec,
+                                    config, rng, crop=spec.crop,
+                                    keep_clean=keep_clean)  # fmt: skip
     return prepare_batch(force_nN, a, v, x_nm, spec, config.effects, rng, crop=spec.crop,
                          clean_fraction=config.clean_fraction,
                          keep_clean=keep_clean)  # fmt: skip
@@ -516,8 +594,11 @@ def train_line_ensemble(
     Xv = line_inputs(vs.lines, spec)  # cropped to a common length, to follow the loss
     Cv, Ev = vs.C, ens.expert_for(Xv)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
-    prepare = partial(_prepare_rows, params={k: params[k] for k in ("lattice_nm",
-                      "velocity_nm_per_s")}, x_nm=x_nm, spec=spec, config=config)  # fmt: skip
+    columns = ("lattice_nm", "velocity_nm_per_s")
+    if config.families is not None:
+        columns += ("F_mean_nN",)
+    prepare = partial(_prepare_rows, params={k: params[k] for k in columns}, x_nm=x_nm,
+                      spec=spec, config=config)  # fmt: skip
     history = []
     t0 = time.perf_counter()
     for k in range(config.members):

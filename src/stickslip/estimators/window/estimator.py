@@ -7,6 +7,7 @@ from typing import Any
 
 from stickslip.conditions import Conditions
 from stickslip.estimators.base import TraceEstimator
+from stickslip.estimators.domain import ETA_EDGE
 from stickslip.estimators.window.inference import OUTPUTS, TraceEstimate, predict_traces
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.traces.trace import Trace
@@ -26,6 +27,7 @@ class WindowEstimator(TraceEstimator):
 
     kind = "window"
     intervals = False
+    eta_edge = ETA_EDGE  # trained on eta >= 1.2: smooth lines land at the edge
 
     def __init__(self, model: TrainedModel, source: str = "bundled") -> None:
         self.model = model
