@@ -33,7 +33,7 @@ MODEL (trained by this script with the same arguments, the calibration's own set
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--typical 3000]
        [--typical-seed 104] [--typical-fraction 0.8] [--paper 3200] [--paper-seed 5]
        [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
-       [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power]
+       [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power] [--families 0.5]
        [--work build/line-train] [--out PATH] [--recalibrate MODEL]
 """
 
@@ -58,6 +58,7 @@ from stickslip.jobs.train import (
     expert_model,
     train_line,
 )
+from stickslip.simulators import effects as fx
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = BundledRecipe()
@@ -88,6 +89,10 @@ def main() -> None:
     ap.add_argument("--spread-power", action=argparse.BooleanOptionalAction,
                     default=LineTrainConfig.spread_power,
                     help="calibrated std c * sd**gamma per class (--no-spread-power: gamma 1)")
+    ap.add_argument("--families", type=float, default=0.0, metavar="FRACTION",
+                    help="put the effect families (the broad nuisance prior, 'train' "
+                         "implementations) on this fraction of the non-pristine training "
+                         "lines (0: none, the bundled recipe so far)")  # fmt: skip
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--recalibrate", type=Path, default=None,
@@ -110,7 +115,9 @@ def main() -> None:
                           spread_hidden=args.spread_hidden,
                           effects=training_effects(args.typical_fraction),
                           calibration_draws=args.calibration_draws,
-                          spread_power=args.spread_power)  # fmt: skip
+                          spread_power=args.spread_power,
+                          families=fx.NuisancePrior() if args.families > 0 else None,
+                          family_fraction=args.families or 0.5)  # fmt: skip
     if args.recalibrate is not None:
         recalibrate(ap, args, training.data, training.parts, cfg)
         return
