@@ -97,6 +97,10 @@ def test_unwritable_out_fails_before_the_run(tmp_path, monkeypatch, single, wher
     assert not sweep_mod.partial_path(out).exists()
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _rows_done(part) -> int:
     """Rows finished in a partial file that another process is writing (0 if unreadable now)."""
     try:
@@ -115,8 +119,11 @@ def test_ctrl_c_stops_soon_keeps_rows_and_prints_resume_command(tmp_path):
     args = ["simulate", "--n", str(n), "--seed", "5", "--velocity", "60", "--length", "0.25",
             "--warmup", "0.25", "--pixels", "8", "--no-progress", "--out", str(out)]  # fmt: skip
     code = "from stickslip.cli.main import main; main()"
+    # as a foreground terminal starts it: a test run started in the background (``&``)
+    # passes SIGINT on ignored, and the child would then never see the Ctrl-C
     proc = subprocess.Popen([sys.executable, "-c", code, *args], stderr=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, text=True)  # fmt: skip
+                            stdout=subprocess.DEVNULL, text=True,
+                            preexec_fn=_default_sigint)  # fmt: skip
     try:
         deadline = time.monotonic() + 180  # numba may compile first
         while _rows_done(part) == 0 and time.monotonic() < deadline and proc.poll() is None:
