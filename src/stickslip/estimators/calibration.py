@@ -38,6 +38,10 @@ def gaussian_z(level: float) -> float:
     return NormalDist().inv_cdf(0.5 + level / 2)
 
 
+#: Two-sided 68 % and 95 % Gaussian quantiles: the half-widths of those intervals in stds.
+Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)
+
+
 @dataclass(frozen=True)
 class SpreadClasses:
     """Classes of lines whose predictive spread is calibrated separately.

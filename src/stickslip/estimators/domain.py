@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from stickslip.estimators.calibration import Z68
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
@@ -92,7 +93,6 @@ CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "embedding")
 #: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
 WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
 LINEAR_TARGETS = ("F_mean_nN", VOLT_NAMES["F_mean_nN"])  # the others are log-normal
-Z68 = 0.9944578832097535  # two-sided 68 % Gaussian quantile
 
 # fields of the kernel's output
 N_DROPS, N_RISES, SPACING_MEDIAN, SPACING_Q25, NOISE, SPAN = range(6)

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from stickslip.estimators.calibration import gaussian_z
+from stickslip.estimators.calibration import Z68, Z95
 from stickslip.estimators.table import BOUNDS, is_missing
 from stickslip.traces.formats.common import RETRACE, TRACE
 from stickslip.traces.trace import Trace
@@ -55,7 +55,6 @@ UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
 #: the std of a row's <F> error without the offset term (line model with an offset
 #: prior, :mod:`stickslip.estimators.offsets`)
 MODEL_STD = "F_model_std_nN"
-Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)
 
 
 def pair_key(trace: Trace) -> tuple[Hashable, ...] | None:

@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 import torch
 
+from stickslip.estimators.calibration import Z68, Z95
 from stickslip.estimators.line.ensemble import (
     N_EXPERT,
-    Z68,
-    Z95,
     LineCNN,
     LineEnsemble,
     LineSpec,

@@ -45,7 +45,7 @@ import torch
 from torch import nn
 
 from stickslip.conditions import GRAPHITE, Reference
-from stickslip.estimators.calibration import SHAPE_LEVELS, SpreadClasses, gaussian_z
+from stickslip.estimators.calibration import SHAPE_LEVELS, Z68, SpreadClasses, gaussian_z
 from stickslip.estimators.mapping import to_reference
 from stickslip.estimators.offsets import OffsetPrior, offset_half_width
 from stickslip.estimators.window.inference import predict_windows
@@ -53,7 +53,6 @@ from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.units import eta_from
 
 TARGETS = ("F_mean_nN", "log_U0_ref", "log_K_ref", "log_eta")
-Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)  # two-sided 68 % and 95 % Gaussian quantiles
 INFER_CHUNK = 512
 N_EXPERT = 5  # expert inputs: U0', K', eta estimates and the windows' spread of U0', K'
 

@@ -67,11 +67,11 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from stickslip.estimators.calibration import Z95
 from stickslip.estimators.line.ensemble import (
     N_EXPERT,
     SHAPE_LEVELS,
     TARGETS,
-    Z95,
     LineCNN,
     LineEnsemble,
     LineSpec,
