@@ -34,7 +34,7 @@ import numpy as np
 from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.modelfile import load_line_model
 from stickslip.estimators.line.training import TRAIN_EFFECTS, LineTrainConfig
-from stickslip.estimators.table import ResultTable
+from stickslip.estimators.table import TARGETS, ResultTable
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.simulators.instrument import (
@@ -47,7 +47,7 @@ from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_
 from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
+KEYS = TARGETS  # <F>, U0, K, eta
 RANDOMISED_SEED, LAB_SEED = 301, 401
 BENCH_SEEDS = (BENCH_SEED, BENCH_SEED + 7919, BENCH_SEED + 15838)
 

@@ -68,6 +68,7 @@ from stickslip.estimators.line.modelfile import (
     save_line_model,
 )
 from stickslip.estimators.pairs import pair_friction
+from stickslip.estimators.table import TARGETS
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators import effects as fx
@@ -83,7 +84,7 @@ from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_
 from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
+KEYS = TARGETS  # <F>, U0, K, eta
 CAL_SEED, EVAL_SEED = 501, 601
 CAL_DRAW_SEED, ALL_SEED, WITH_SEED, PAIR_SEED = 5101, 6101, 6200, 6401
 

@@ -469,7 +469,7 @@ def _check_sweep(p: Path, fmt: Any, done: np.ndarray) -> None:
         raise DatasetError(f"{p}: incomplete dataset (finish it with --resume)")
 
 
-def _load_zarr(p: Path, rows: slice | np.ndarray | None) -> Dataset:
+def _load_zarr(p: Path, rows: slice | np.ndarray | None, forces: bool) -> Dataset:
     g = _open_zarr(p)
     try:
         _check_sweep(p, g.attrs.get("format"), g["done"][:])
@@ -480,12 +480,34 @@ def _load_zarr(p: Path, rows: slice | np.ndarray | None) -> Dataset:
             return np.asarray(a[rows] if isinstance(rows, slice) else a.oindex[np.asarray(rows)])
 
         params = {k: take(a) for k, a in g["params"].arrays()}
-        return Dataset(force_nN=take(g["force_nN"]), x_nm=np.asarray(g["x_nm"][:]),
-                       params=params, attrs=dict(g.attrs))  # fmt: skip
+        force = take(g["force_nN"]) if forces else FileRows(p)
+        return Dataset(force_nN=force, x_nm=np.asarray(g["x_nm"][:]), params=params,
+                       attrs=dict(g.attrs))  # fmt: skip
     except DatasetError:
         raise
-    except Exception as e:
+    except Exception as e:  # zarr raises its own error types for damaged stores
         raise DatasetError(f"{p}: unreadable Zarr store ({type(e).__name__}: {e})") from None
+
+
+def _read(path: str | os.PathLike, rows: slice | np.ndarray | None, forces: bool) -> Dataset:
+    """A checked sweep file or Zarr store: rows ``rows`` (all: None) of the parameters,
+    with the forces read (``forces``) or left on disk (:class:`FileRows`)."""
+    p = Path(path)
+    if not p.exists():
+        raise DatasetError(f"{p}: file not found")
+    if is_zarr_path(p) or p.is_dir():
+        return _load_zarr(p, rows, forces)
+    try:
+        with h5py.File(p, "r") as f:
+            _check_sweep(p, f.attrs.get("format"), f["done"][:])
+            sel = slice(None) if rows is None else rows
+            force = f["force_nN"][sel] if forces else FileRows(p)
+            params = {k: v[sel] for k, v in f["params"].items()}
+            return Dataset(force_nN=force, x_nm=f["x_nm"][:], params=params, attrs=dict(f.attrs))
+    except DatasetError:
+        raise
+    except (OSError, KeyError) as e:
+        raise DatasetError(f"{p}: unreadable dataset ({e})") from None
 
 
 def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None) -> Dataset:
@@ -496,22 +518,7 @@ def load_dataset(path: str | os.PathLike, rows: slice | np.ndarray | None = None
     DatasetError
         If the file is missing, not HDF5 or Zarr, not a stickslip sweep, or incomplete.
     """
-    p = Path(path)
-    if not p.exists():
-        raise DatasetError(f"{p}: file not found")
-    if is_zarr_path(p) or p.is_dir():
-        return _load_zarr(p, rows)
-    try:
-        with h5py.File(p, "r") as f:
-            _check_sweep(p, f.attrs.get("format"), f["done"][:])
-            sel = slice(None) if rows is None else rows
-            force = f["force_nN"][sel]
-            params = {k: v[sel] for k, v in f["params"].items()}
-            return Dataset(force_nN=force, x_nm=f["x_nm"][:], params=params, attrs=dict(f.attrs))
-    except DatasetError:
-        raise
-    except (OSError, KeyError) as e:
-        raise DatasetError(f"{p}: unreadable dataset ({e})") from None
+    return _read(path, rows, forces=True)
 
 
 def open_dataset(path: str | os.PathLike) -> Dataset:
@@ -526,27 +533,7 @@ def open_dataset(path: str | os.PathLike) -> Dataset:
     DatasetError
         If the file is missing, not HDF5 or Zarr, not a stickslip sweep, or incomplete.
     """
-    p = Path(path)
-    if not p.exists():
-        raise DatasetError(f"{p}: file not found")
-    try:
-        if is_zarr_path(p) or p.is_dir():
-            g = _open_zarr(p)
-            _check_sweep(p, g.attrs.get("format"), g["done"][:])
-            params = {k: np.asarray(a[...]) for k, a in g["params"].arrays()}
-            x_nm, attrs = np.asarray(g["x_nm"][:]), dict(g.attrs)
-        else:
-            with h5py.File(p, "r") as f:
-                _check_sweep(p, f.attrs.get("format"), f["done"][:])
-                params = {k: v[:] for k, v in f["params"].items()}
-                x_nm, attrs = f["x_nm"][:], dict(f.attrs)
-        return Dataset(force_nN=FileRows(p), x_nm=x_nm, params=params, attrs=attrs)
-    except DatasetError:
-        raise
-    except (OSError, KeyError) as e:
-        raise DatasetError(f"{p}: unreadable dataset ({e})") from None
-    except Exception as e:  # zarr raises its own error types for damaged stores
-        raise DatasetError(f"{p}: unreadable Zarr store ({type(e).__name__}: {e})") from None
+    return _read(path, None, forces=False)
 
 
 def concat_datasets(sets: list[Dataset], columns: list[str] | None = None) -> Dataset:
