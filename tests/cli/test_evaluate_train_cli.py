@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
+from stickslip.estimators.line.modelfile import line_metadata
 from stickslip.estimators.load import load_estimator
 from stickslip.simulators import PhysicalSettings, SweepConfig, run_sweep, simulate
 from stickslip.traces.trace import write_trace_csv
@@ -97,6 +98,20 @@ def test_train_line_on_a_small_sweep_then_infer_with_it(tmp_path):
     assert r.exit_code == 0, r.output
     rows = list(csv.DictReader((tmp_path / "r.csv").open()))
     assert len(rows) == 48 and all(float(r["U0_eV_hi95"]) > float(r["U0_eV_lo95"]) for r in rows)
+
+
+def test_train_line_with_families_and_loader_settings_records_them(tmp_path):
+    data = run_sweep(SweepConfig(n=24, seed=34), tmp_path / "s.h5", progress=False)
+    model = tmp_path / "fam.pt"
+    r = _run(["train", "--kind", "line", "--data", data, "--epochs", 1, "--members", 1,
+              "--families", 0.25, "--workers", 0, "--shuffle-rows", 16,
+              "--out", model])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    config = line_metadata(model)["train_config"]
+    assert config["family_fraction"] == 0.25 and "precursor" in config["families"]
+    assert line_metadata(model)["metrics"]["loader"]["num_workers"] == 0
+    r = _run(["train", "--kind", "line", "--data", data, "--families", 1.5, "--out", model])
+    assert r.exit_code == 2 and "--families" in r.stderr
 
 
 @pytest.mark.parametrize("kind", ["window", "line"])

@@ -1,4 +1,5 @@
-"""Training data: labelled traces mapped onto the reference, and mixing fractions."""
+"""Training data: labelled traces mapped onto the reference, mixing fractions, and the
+bundled recipe's data (cached, streamed from disk)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,16 @@ import numpy as np
 import pytest
 
 from stickslip.conditions import GRAPHITE
-from stickslip.jobs.train import TrainingData, TrainingDataError, labelled_dataset, mix_in
+from stickslip.jobs.train import (
+    BundledRecipe,
+    TrainingData,
+    TrainingDataError,
+    bundled_line_data,
+    labelled_dataset,
+    mix_in,
+)
 from stickslip.simulators import PhysicalSettings, simulate
-from stickslip.traces.dataset import Dataset
+from stickslip.traces.dataset import Dataset, Rows, load_dataset
 from stickslip.traces.trace import Trace
 
 
@@ -47,3 +55,17 @@ def test_mixing_reaches_the_asked_fraction():
     assert mixed.data.n == 1000 and real == 10
     with pytest.raises(TrainingDataError):
         mix_in(TrainingData(ds(10, 0.0)), ds(3, 1.0), 1.5)
+
+
+@pytest.mark.slow
+def test_bundled_recipe_data_stays_on_disk_and_records_its_parts(tmp_path):
+    recipe = BundledRecipe(n=6, seeds=(11, 12), typical=4, paper=4, paper_seed=5)
+    training = bundled_line_data(tmp_path, recipe, progress=False)
+    d = training.data
+    assert d.n == 6 + 6 + 4 + 4 and isinstance(d.force_nN, Rows)  # streamed, not loaded
+    assert len(training.parts) == 4 and all(p["fingerprint"] for p in training.parts)
+    first = load_dataset(tmp_path / "randomised_6_11.h5")
+    np.testing.assert_array_equal(d.force_nN[:6], first.force_nN)
+    # a second call reuses the cached sets
+    again = bundled_line_data(tmp_path, recipe, progress=False)
+    assert [p["fingerprint"] for p in again.parts] == [p["fingerprint"] for p in training.parts]

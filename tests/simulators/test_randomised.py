@@ -1,4 +1,4 @@
-"""Draws of domain-randomised training sets (no simulation needed)."""
+"""Draws of domain-randomised training sets (no simulation needed), and their cache."""
 
 import json
 
@@ -10,9 +10,11 @@ from stickslip.simulators.randomised import (
     A_REF_NM,
     RandomisedConfig,
     cache_path,
+    cached_randomised_set,
     draw_randomised,
     lab_config,
 )
+from stickslip.traces.dataset import Rows
 from stickslip.units import eta_from
 
 
@@ -81,3 +83,15 @@ def test_cache_path_keeps_sets_of_other_settings_apart():
     assert plain not in others and len(others) == 2
     assert all(p.name.startswith("randomised_400_9_") for p in others)
     assert cache_path(lab_config(400, 9), "w") == cache_path(lab_config(400, 9), "w")
+
+
+def test_cached_set_is_simulated_once_and_can_stay_on_disk(tmp_path):
+    cfg = RandomisedConfig(n=3, seed=13, length_nm=1.0, pixels=32, chunk=2)
+    loaded = cached_randomised_set(cfg, tmp_path, progress=False)
+    path = cache_path(cfg, tmp_path)
+    stamp = path.stat().st_mtime_ns
+    lazy = cached_randomised_set(cfg, tmp_path, progress=False, lazy=True)
+    assert path.stat().st_mtime_ns == stamp  # reused, not simulated again
+    assert isinstance(lazy.force_nN, Rows) and not isinstance(loaded.force_nN, Rows)
+    np.testing.assert_array_equal(np.asarray(lazy.force_nN), loaded.force_nN)
+    np.testing.assert_array_equal(lazy.params["K_N_m"], loaded.params["K_N_m"])

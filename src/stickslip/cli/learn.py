@@ -29,6 +29,7 @@ from stickslip.cli.common import (
 )
 from stickslip.conditions import GRAPHITE, check_values
 from stickslip.estimators.base import Estimator
+from stickslip.estimators.line.streaming import StreamSettings
 from stickslip.estimators.line.training import LineTrainConfig
 from stickslip.estimators.load import load_estimator
 from stickslip.estimators.table import TableFormatError, has_estimate, table_format
@@ -39,6 +40,7 @@ from stickslip.jobs import evaluate as ev
 from stickslip.jobs import infer as inf
 from stickslip.jobs import train as tr
 from stickslip.jobs.demo import load_examples
+from stickslip.simulators.effects import NuisancePrior
 
 MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'classical', or "
               "'window' (the bundled paper MLP); default: the bundled whole-line model.")
@@ -277,6 +279,14 @@ def train_cmd(
     train_stride: int = typer.Option(16, "--train-stride", help="Window kind: training stride."),
     noise: float = typer.Option(0.0, "--noise", help="Window kind: white-noise augmentation "
                                 "up to NOISE nN (0: the paper's clean training)."),
+    families: float = typer.Option(0.0, "--families", help="Line kind: fraction of the "
+                                   "non-pristine training lines given a draw of the effect "
+                                   "families (the broad nuisance prior; 0: none)."),
+    workers: int = typer.Option(StreamSettings.num_workers, "--workers", help="Line kind: "
+                                "loader processes that read and corrupt the batches "
+                                "(0: in the training process)."),
+    shuffle_rows: int = typer.Option(StreamSettings.shuffle_rows, "--shuffle-rows",
+                                     help="Line kind: rows in each loader's shuffle buffer."),
     seed: int = typer.Option(0, "--seed", help="Seed of the split and the optimiser."),
 ) -> None:
     """Train an estimator: the whole-line ensemble (default) or the paper's window MLP.
@@ -290,6 +300,8 @@ def train_cmd(
         usage_error(f"--features must be raw or pi (got '{features}')")
     if (epochs is not None and epochs < 1) or (lr is not None and not lr > 0) or noise < 0:
         usage_error("--epochs and --lr must be positive, --noise >= 0")
+    if not 0.0 <= families <= 1.0 or workers < 0 or shuffle_rows < 1:
+        usage_error("--families must be in [0, 1], --workers >= 0, --shuffle-rows >= 1")
     if out.is_dir() or not out.parent.exists():
         usage_error(f"{out}: cannot write a model file there")
     try:
@@ -310,11 +322,14 @@ def train_cmd(
     try:
         if kind == "line":
             cfg = LineTrainConfig(members=members, seed=seed,
+                                  families=NuisancePrior() if families > 0 else None,
+                                  family_fraction=families or LineTrainConfig.family_fraction,
                                   **{k: v for k, v in (("epochs", epochs), ("lr", lr),
                                                        ("batch_size", batch_size))
                                      if v is not None})  # fmt: skip
             exp = tr.expert_model(expert, work)
-            report = tr.train_line(training, out, cfg, exp, expert, progress=show_progress())
+            report = tr.train_line(training, out, cfg, exp, expert, progress=show_progress(),
+                                   stream=StreamSettings(workers, shuffle_rows))
             val = report.get("validation", {})
             info(f"validation: {val}" if val else "trained")
         else:

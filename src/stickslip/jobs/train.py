@@ -49,7 +49,6 @@ from stickslip.traces.dataset import (
     DatasetError,
     concat_datasets,
     dataset_traces,
-    load_dataset,
     open_dataset,
 )
 from stickslip.traces.trace import Trace
@@ -237,14 +236,15 @@ def bundled_line_data(work: str | os.PathLike, recipe: BundledRecipe = BundledRe
     work = Path(work)
     if recipe.paper_seed in RESERVED_SEEDS:
         raise TrainingDataError("the paper-preset seed must differ from the reserved seeds")
-    sets = [cached_randomised_set(RandomisedConfig(n=recipe.n, seed=s), work, progress)
+    # forces stay on disk (streamed in training); only parameters are read
+    sets = [cached_randomised_set(RandomisedConfig(n=recipe.n, seed=s), work, progress, lazy=True)
             for s in recipe.seeds]  # fmt: skip
     if recipe.typical:
         sets.append(cached_randomised_set(lab_config(recipe.typical, recipe.typical_seed), work,
-                                          progress))  # fmt: skip
+                                          progress, lazy=True))  # fmt: skip
     columns = sorted(sets[0].params)
     if recipe.paper:
-        ds = load_dataset(sweep_if_missing(work / f"paper_{recipe.paper}_{recipe.paper_seed}.h5",
+        ds = open_dataset(sweep_if_missing(work / f"paper_{recipe.paper}_{recipe.paper_seed}.h5",
                                            recipe.paper, recipe.paper_seed))  # fmt: skip
         ds.params["defect_count"] = np.count_nonzero(ds.params["defect_height_U0"], axis=1)
         sets.append(ds)

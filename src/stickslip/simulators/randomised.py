@@ -34,6 +34,7 @@ from stickslip.traces.dataset import (
     Dataset,
     create_dataset_file,
     load_dataset,
+    open_dataset,
     read_attrs,
     write_rows,
 )
@@ -171,12 +172,13 @@ def cache_path(config: RandomisedConfig, work: str | os.PathLike) -> Path:
 
 
 def cached_randomised_set(config: RandomisedConfig, work: str | os.PathLike,
-                          progress: bool = True) -> Dataset:  # fmt: skip
+                          progress: bool = True, lazy: bool = False) -> Dataset:  # fmt: skip
     """The set at :func:`cache_path`, simulated first if it is missing or was made with
-    other settings than ``config``."""
+    other settings than ``config``; with ``lazy``, its forces are left on disk
+    (:func:`~stickslip.traces.dataset.open_dataset`, for streamed training)."""
     path = cache_path(config, work)
     # the stored config is in the file's attributes: no need to read its traces twice
     if not path.exists() or RandomisedConfig.from_json(
             str(read_attrs(path).get("config", "{}"))) != config:  # fmt: skip
         make_randomised_set(config, path, progress)  # replaces the file only when done
-    return load_dataset(path)
+    return open_dataset(path) if lazy else load_dataset(path)
