@@ -42,8 +42,12 @@ bench-learn: $(STAMP)
 model: $(STAMP)
 	$(BIN)/python scripts/train_default_model.py
 
+# train the bundled line model, calibrate it on the effect families, refit its domain reference
 line-model: $(STAMP)
-	$(BIN)/python scripts/train_line_model.py
+	$(BIN)/python scripts/train_line_model.py --out build/line-train/line_model_trained.pt
+	$(BIN)/python benchmarks/families.py --line-model build/line-train/line_model_trained.pt \
+	    --write src/stickslip/resources/line_model.pt
+	$(BIN)/python benchmarks/domain.py --write-reference
 
 clean:
 	rm -rf $(VENV) stickslip-demo build

@@ -44,7 +44,7 @@ Usage: python benchmarks/learning_curve.py [--sizes 250 500 1000] [--family-size
        [--seeds 7301 7302 ...] [--set-size 500] [--train-seed S]
        [--expert clean|bundled|none] [--held-out precursor] [--n-bench 200]
        [--work build/learning-curve] [--pools build/families] [--bench build/lab-bench]
-       [--threads 1] [--workers 0] [--no-bundled] [--train-only]
+       [--threads 1] [--workers 0] [--no-bundled] [--reference PATH] [--train-only]
 """
 
 from __future__ import annotations
@@ -156,10 +156,11 @@ def trained(args: argparse.Namespace, n: int, families: bool | str, expert) -> P
 
 
 def scored(args: argparse.Namespace, model: Path | None, cal: Dataset,
-           sets: dict[str, Dataset]) -> dict:  # fmt: skip
+           sets: dict[str, Dataset], name: str | None = None) -> dict:  # fmt: skip
     """Calibrate ``model`` (None: the bundled one) on the families, score it on ``sets``
-    (cached beside the model in ``--work``), and save the calibrated model."""
-    name = model.stem if model else "bundled"
+    (cached beside the model in ``--work`` under ``name``, default the file's stem), and
+    save the calibrated model (not for the reference, ``name`` "bundled")."""
+    name = name or (model.stem if model else "bundled")
     raw = model.read_bytes() if model else load_bundled(BUNDLED, lambda p: Path(p).read_bytes())
     digest = hashlib.sha256(raw).hexdigest()[:16]
     key = {"model": digest, "sets": sorted(sets), "n_bench": args.n_bench}
@@ -185,7 +186,7 @@ def scored(args: argparse.Namespace, model: Path | None, cal: Dataset,
     calibrate_on_families(lofo, cal, FamilyCalibration(prior=fx.NuisancePrior().without(
         args.held_out)))  # fmt: skip
     out["sets"][held] = set_metrics(LineEstimator(lofo, name), sets[held])
-    if model is not None:
+    if model is not None and name != "bundled":
         save_line_model(ens, args.work / f"{name}_cal.pt", tuple(meta["train_config"]["channels"]),
                         meta["train_config"], meta["dataset"],
                         {**meta["metrics"], "family_calibration": cal_report})  # fmt: skip
@@ -314,6 +315,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1, help="torch threads")
     ap.add_argument("--workers", type=int, default=0, help="training batch loader workers")
     ap.add_argument("--no-bundled", action="store_true", help="do not score the bundled model")
+    ap.add_argument("--reference", type=Path, default=None,
+                    help="line model file scored as the reference point (stars) in place of "
+                         "the bundled one (e.g. a copy of an earlier bundled model)")
     ap.add_argument("--train-only", action="store_true", help="train (cache) models, no scores")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -330,7 +334,7 @@ def main() -> None:
     if args.train_only:
         return
     cal, sets = eval_sets(args)
-    results = [] if args.no_bundled else [scored(args, None, cal, sets)]
+    results = [] if args.no_bundled else [scored(args, args.reference, cal, sets, "bundled")]
     results += [scored(args, m, cal, sets) for m in models]
     print(HEAD)
     for r in results:

@@ -9,8 +9,9 @@
    paper-preset trajectories (graphite lattice, 60 nm/s, flat substrate: the expert's
    own conditions, so the members learn how far to trust it there and how small their
    spread can be; seed --paper-seed, apart from the expert's and the benchmarks' seeds).
-2. Trains the ensemble with on-the-fly detector effects and calibrates its spread on a
-   held-out split. The effects' prior (line_training.training_effects) gives a
+2. Trains the ensemble with on-the-fly detector effects (and, on a --families fraction of
+   the non-pristine lines, default 0.5, a draw of the effect families) and calibrates its
+   spread on a held-out split. The effects' prior (line_training.training_effects) gives a
    --typical-fraction of lines a typical careful measurement's effects (instrument.LAB)
    and the rest the broad ranges (line_training.TRAIN_EFFECTS). The members read an
    expert input and learn when to trust it (stickslip.estimators.line.ensemble): by default the
@@ -18,7 +19,9 @@
    data and recipe, without its noise augmentation: the most precise expert on a clean
    line, and plainly wrong on a noisy one), trained here and cached; --expert bundled
    reads the bundled window model, --expert none trains without.
-3. Saves it to src/stickslip/resources/line_model.pt (or --out).
+3. Saves it to src/stickslip/resources/line_model.pt (or --out). The bundled file is then
+   calibrated on the effect families (benchmarks/families.py --write) and its domain
+   reference refitted (benchmarks/domain.py --write-reference): ``make line-model``.
 
 A thin wrapper over :mod:`stickslip.jobs.train` (``bundled_line_data``, ``expert_model``,
 ``train_line``): with its defaults it trains what
@@ -30,8 +33,8 @@ command line leaves at their defaults.
 MODEL (trained by this script with the same arguments, the calibration's own settings
 --calibration-draws and --spread-power aside) on the same validation trajectories.
 
-Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103] [--typical 3000]
-       [--typical-seed 104] [--typical-fraction 0.8] [--paper 3200] [--paper-seed 5]
+Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102] [--typical 1500]
+       [--typical-seed 104] [--typical-fraction 0.8] [--paper 1500] [--paper-seed 5]
        [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
        [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power] [--families 0.5]
        [--work build/line-train] [--out PATH] [--recalibrate MODEL]
@@ -89,7 +92,7 @@ def main() -> None:
     ap.add_argument("--spread-power", action=argparse.BooleanOptionalAction,
                     default=LineTrainConfig.spread_power,
                     help="calibrated std c * sd**gamma per class (--no-spread-power: gamma 1)")
-    ap.add_argument("--families", type=float, default=0.0, metavar="FRACTION",
+    ap.add_argument("--families", type=float, default=0.5, metavar="FRACTION",
                     help="put the effect families (the broad nuisance prior, 'train' "
                          "implementations) on this fraction of the non-pristine training "
                          "lines (0: none, the bundled recipe so far)")  # fmt: skip

@@ -292,7 +292,9 @@ def train_cmd(
     """Train an estimator: the whole-line ensemble (default) or the paper's window MLP.
 
     Reproduce the bundled line model with
-    'stickslip train --kind line --recipe bundled --expert clean --seed 102 --out M.pt'.
+    'stickslip train --kind line --recipe bundled --expert clean --families 0.5 --seed 102
+    --out M.pt', then 'python benchmarks/families.py --line-model M.pt --write M2.pt'
+    (its calibration on the effect families).
     """
     if kind not in tr.KINDS:
         usage_error(f"--kind must be one of {', '.join(tr.KINDS)} (got '{kind}')")

@@ -45,7 +45,15 @@ estimator:
    model gives eta 1.15-1.45 for most of them), where it also puts weak stick-slip, so
    an estimate there cannot say which of the two the line is (the classical
    estimator inverts the slips and can report eta < 1.2, so it is held to the window);
-5. for estimators that give one: ``domain_embedding`` (a column of the row), the
+5. for learned estimators whose eta estimate is below :data:`ETA_CONFIRM`, the line's
+   own slips: the classical estimator (slip detection, stick fits, PT inversion) must
+   answer it. A model trained with the effect families (low-pass, precursor softening)
+   puts smooth lines at eta 1.4-2 too, beyond any edge that keeps weak stick-slip in
+   domain; the inversion tells them apart (it finds no slips to fit, or a peak and
+   slope no PT stick-slip has). The estimator puts the classical refusal in the row's
+   ``stick_slip_check`` (absent when not checked or answered) -- ``"eta near the
+   trained window's edge and the slips do not invert to stick-slip"``;
+6. for estimators that give one: ``domain_embedding`` (a column of the row), the
    distance of the line from the estimator's training lines in units of its limit
    (the whole-line CNN: Mahalanobis distance of its pooled features from those of
    simulated training-like lines, :class:`EmbeddingReference`) -- ``"line unlike the
@@ -82,13 +90,16 @@ ETA_WINDOW = (1.2, 40.0)
 #: Estimates of eta below this are too close to the window's lower edge to rule out
 #: smooth sliding (tuned on the seed-1 sets of ``benchmarks/domain.py``).
 ETA_EDGE = 1.45
+#: Learned estimates of eta below this are kept in domain only if the line's own slips
+#: invert to stick-slip (the row's ``stick_slip_check``; tuned on the seed-1 sets).
+ETA_CONFIRM = 2.5
 MIN_SLIPS = 2
 MAX_RISE_FRACTION = 0.25
 MIN_SPACING = 0.8  # lattice spacings
 WIDEN_FACTOR = 3.0
 MAX_SCORE = 1e3  # domain_score is capped here (an eta of 0 would give infinity)
 #: Checks in the order a tie is reported.
-CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "embedding")
+CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "stick_slip", "embedding")
 #: Estimates whose intervals :func:`widen_row` widens: in nN units, and in V units for
 #: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
 WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
@@ -264,6 +275,8 @@ def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[st
         out["eta_low"] = max(out.get("eta_low", 0.0), edge)
     if np.isfinite(lo):
         out["eta_high"] = lo / ETA_WINDOW[1]
+    if row.get("stick_slip_check") and np.isfinite(eta):
+        out["stick_slip"] = ETA_CONFIRM / eta if eta > 0 else np.inf
     emb = _number(row, "domain_embedding")
     if np.isfinite(emb):
         out["embedding"] = emb
@@ -297,6 +310,9 @@ def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
                 "smooth sliding not ruled out")  # fmt: skip
     if check == "eta_high":
         return f"eta above the trained window ({eta:.3g} > {ETA_WINDOW[1]:g})"
+    if check == "stick_slip":
+        return (f"eta near the trained window's edge ({eta:.3g} < {ETA_CONFIRM:g}) and the "
+                f"slips do not invert to stick-slip (classical: {row['stick_slip_check']})")
     emb = _number(row, "domain_embedding")
     return f"line unlike the training lines (embedding distance {emb:.2g}x the limit)"
 

@@ -68,10 +68,10 @@ class BundledRecipe:
     """The data behind the bundled line model (``--recipe bundled``)."""
 
     n: int = 4000
-    seeds: tuple[int, ...] = (102, 103)
-    typical: int = 3000
+    seeds: tuple[int, ...] = (102,)
+    typical: int = 1500
     typical_seed: int = 104
-    paper: int = 3200
+    paper: int = 1500
     paper_seed: int = 5
     expert_n: int = 1600
     expert_seed: int = PAPER_TRAIN_SEED

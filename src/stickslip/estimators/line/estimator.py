@@ -11,10 +11,11 @@ import numpy as np
 
 from stickslip.conditions import Conditions
 from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
+from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.domain import ETA_CONFIRM, ETA_EDGE, EmbeddingReference
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
-from stickslip.estimators.table import BOUNDS, TARGETS
+from stickslip.estimators.table import BOUNDS, OK, TARGETS
 from stickslip.traces.trace import Trace
 
 TEMPERATURE_TOLERANCE_K = 1.0
@@ -166,4 +167,22 @@ class LineEstimator(TraceEstimator):
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
             out[i] = row
+        if self.domain_verdict:
+            self._check_stick_slip(traces, conditions, out)
         return out, notes
+
+    def _check_stick_slip(self, traces: Sequence[Trace], conditions: Sequence[Conditions],
+                          rows: list[dict[str, Any] | str]) -> None:  # fmt: skip
+        """Rows whose eta is below :data:`~stickslip.estimators.domain.ETA_CONFIRM` get
+        the classical estimator's refusal of their line in ``stick_slip_check`` (the
+        verdict's stick-slip check); lines it answers, and other rows, get nothing."""
+        low = [i for i, r in enumerate(rows)
+               if isinstance(r, dict) and r["eta"] < ETA_CONFIRM]  # fmt: skip
+        if not low:
+            return
+        classical = ClassicalEstimator(reference=self.reference)
+        done, _ = classical.estimate([traces[i] for i in low], [conditions[i] for i in low])
+        for i, res in zip(low, done, strict=True):
+            quality = res if isinstance(res, str) else res["quality"]
+            if quality != OK:
+                rows[i]["stick_slip_check"] = quality  # type: ignore[index]
