@@ -51,6 +51,7 @@ from stickslip.estimators.line.training import (
     CALIBRATION_FIELDS,
     TYPICAL_FRACTION,
     LineTrainConfig,
+    family_settings,
     recalibrate_line_ensemble,
     training_effects,
 )
@@ -61,7 +62,6 @@ from stickslip.jobs.train import (
     expert_model,
     train_line,
 )
-from stickslip.simulators import effects as fx
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = BundledRecipe()
@@ -95,7 +95,7 @@ def main() -> None:
     ap.add_argument("--families", type=float, default=0.5, metavar="FRACTION",
                     help="put the effect families (the broad nuisance prior, 'train' "
                          "implementations) on this fraction of the non-pristine training "
-                         "lines (0: none, the bundled recipe so far)")  # fmt: skip
+                         "lines (0: none)")  # fmt: skip
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--recalibrate", type=Path, default=None,
@@ -119,8 +119,7 @@ def main() -> None:
                           effects=training_effects(args.typical_fraction),
                           calibration_draws=args.calibration_draws,
                           spread_power=args.spread_power,
-                          families=fx.NuisancePrior() if args.families > 0 else None,
-                          family_fraction=args.families or 0.5)  # fmt: skip
+                          **family_settings(args.families))  # fmt: skip
     if args.recalibrate is not None:
         recalibrate(ap, args, training.data, training.parts, cfg)
         return

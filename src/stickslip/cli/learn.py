@@ -30,7 +30,7 @@ from stickslip.cli.common import (
 from stickslip.conditions import GRAPHITE, check_values
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.line.streaming import StreamSettings
-from stickslip.estimators.line.training import LineTrainConfig
+from stickslip.estimators.line.training import LineTrainConfig, family_settings
 from stickslip.estimators.load import load_estimator
 from stickslip.estimators.table import TableFormatError, has_estimate, table_format
 from stickslip.estimators.window.features import FeatureError
@@ -40,7 +40,6 @@ from stickslip.jobs import evaluate as ev
 from stickslip.jobs import infer as inf
 from stickslip.jobs import train as tr
 from stickslip.jobs.demo import load_examples
-from stickslip.simulators.effects import NuisancePrior
 
 MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'classical', or "
               "'window' (the bundled paper MLP); default: the bundled whole-line model.")
@@ -324,8 +323,7 @@ def train_cmd(
     try:
         if kind == "line":
             cfg = LineTrainConfig(members=members, seed=seed,
-                                  families=NuisancePrior() if families > 0 else None,
-                                  family_fraction=families or LineTrainConfig.family_fraction,
+                                  **family_settings(families),
                                   **{k: v for k, v in (("epochs", epochs), ("lr", lr),
                                                        ("batch_size", batch_size))
                                      if v is not None})  # fmt: skip

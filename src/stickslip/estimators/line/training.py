@@ -62,6 +62,7 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Any
 
 import numpy as np
 import torch
@@ -178,6 +179,14 @@ class LineTrainConfig:
         else:
             d["families"] = self.families.to_dict()
         return d
+
+
+def family_settings(fraction: float) -> dict[str, Any]:
+    """:class:`LineTrainConfig` keywords for the broad nuisance prior's families on a
+    ``fraction`` of the non-pristine training lines (0: no families)."""
+    if fraction > 0:
+        return {"families": fx.NuisancePrior(), "family_fraction": float(fraction)}
+    return {"families": None, "family_fraction": LineTrainConfig.family_fraction}
 
 
 def training_families(train_config: dict) -> tuple[fx.NuisancePrior | None, float]:
