@@ -23,6 +23,7 @@ timed alternately in the same sitting, and the machine. Sets are cached under
 
 Usage: python benchmarks/domain.py [--seed 2] [--bench-seed 20261121] [--n 200]
        [--n-speed 5000] [--repeats 3] [--threads 2] [--work build/domain] [--skip-speed]
+       [--speed-only] [--eta-confirm X]
 """
 
 from __future__ import annotations
@@ -337,6 +338,10 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=ROOT / "build" / "domain")
     parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument("--speed-only", action="store_true", help="skip the rates")
+    parser.add_argument("--eta-confirm", type=float, default=None,
+                        help="the line model's ETA_CONFIRM for this run (0: no stick-slip "
+                             "check; default: the library's)")  # fmt: skip
     parser.add_argument("--write-reference", action="store_true",
                         help="Fit the line model's embedding reference and write it to "
                              "src/stickslip/resources/line_domain.npz, then stop.")  # fmt: skip
@@ -345,13 +350,19 @@ def main() -> None:
     if args.write_reference:
         write_reference(args.work, ROOT / "src" / "stickslip" / "resources" / "line_domain.npz")
         return
+    import stickslip.estimators.line.estimator as line_estimator
     from stickslip.estimators.classical.estimator import ClassicalEstimator
     from stickslip.estimators.load import load_estimator
 
+    if args.eta_confirm is not None:
+        line_estimator.ETA_CONFIRM = args.eta_confirm
+    line = load_estimator(None)
+    if args.speed_only:
+        speed(line, args.n_speed, args.repeats, args.work)
+        return
     sets = all_sets(args.n, args.seed, args.bench_seed, args.work)
     print(f"sets of seed {args.seed} ({args.n} traces each), lab bench of seed "
           f"{args.bench_seed} ({len(sets['lab_bench'])} traces)")
-    line = load_estimator(None)
     print_rates("line model (bundled)", rates(line, sets))
     print_rates("classical estimator", rates(ClassicalEstimator(), sets))
     if not args.skip_speed:
