@@ -10,7 +10,13 @@ import pytest
 
 from stickslip.estimators import domain as D
 from stickslip.estimators.classical.estimator import ClassicalEstimator
-from stickslip.estimators.domain import EmbeddingReference, assess, trace_checks, widen_row
+from stickslip.estimators.domain import (
+    EmbeddingReference,
+    assess,
+    trace_checks,
+    widen_row,
+    widen_rows,
+)
 from stickslip.traces.readers import collect_traces
 from stickslip.traces.trace import Trace
 
@@ -138,6 +144,30 @@ def test_widening_scales_half_widths_linearly_for_friction_and_in_log_space_for_
     wide = lognormal_row(5.0, 0.3)  # the log-normal of three times the log-width
     for k in ("eta_lo68", "eta_hi68", "eta_lo95", "eta_hi95", "eta_std"):
         assert r[k] == pytest.approx(wide[k], rel=1e-9)
+
+
+def test_widening_a_table_widens_each_row_on_its_own_columns():
+    nN = {"F_mean_nN": 1.0, "F_mean_nN_lo95": 0.8, "F_mean_nN_hi95": 1.3, **lognormal_row(5.0, 0.1)}
+    volts = {"F_mean_V": 0.2, "F_mean_V_lo95": 0.1, "F_mean_V_hi95": 0.25, "F_mean_V_std": 0.05}
+    odd = {"K_N_m": 2.0, "K_N_m_lo95": -1.0, "K_N_m_hi95": 4.0, "U0_eV": float("nan")}
+    rows = [dict(nN), dict(volts), dict(odd), {"quality": "too few slips"}]
+    widen_rows(rows, 2.0)
+    assert (rows[0]["F_mean_nN_lo95"], rows[0]["F_mean_nN_hi95"]) == pytest.approx((0.6, 1.6))
+    assert rows[0]["eta_hi95"] == pytest.approx(lognormal_row(5.0, 0.2)["eta_hi95"])
+    assert "F_mean_V" not in rows[0] and "F_mean_nN" not in rows[1]
+    assert (rows[1]["F_mean_V_lo95"], rows[1]["F_mean_V_hi95"]) == pytest.approx((0.0, 0.3))
+    assert rows[1]["F_mean_V_std"] == pytest.approx(0.1)
+    # a log-normal bound at or below zero is left as it is, the other one widens
+    assert rows[2]["K_N_m_lo95"] == -1.0 and rows[2]["K_N_m_hi95"] == pytest.approx(8.0)
+    assert rows[3] == {"quality": "too few slips"}
+
+
+def test_trace_checks_on_several_threads_match_one_thread():
+    lines = [sawtooth(period_nm=A * (1 + k % 3)) for k in range(600)]
+    one = trace_checks([X] * 600, lines, threads=1)
+    two = trace_checks([X] * 600, lines, threads=2)
+    for field in ("n_drops", "n_rises", "spacing_median_nm", "spacing_q25_nm", "noise_nN"):
+        np.testing.assert_array_equal(getattr(one, field), getattr(two, field))
 
 
 def test_only_rows_out_of_domain_are_widened():

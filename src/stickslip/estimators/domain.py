@@ -14,9 +14,9 @@ Every estimator's :meth:`~stickslip.estimators.base.TraceEstimator.predict` ends
     Empty in domain; else the failed checks in plain words, worst first, separated
     by ``"; "`` (``"no estimate: <quality>"`` for rows without an estimate).
 
-The checks. All but the last read the trace itself (:func:`trace_checks`, a compiled
-kernel: about 20 us per 512-pixel line) and the row's estimate, so they hold for every
-estimator:
+The checks. The first four read the trace itself (:func:`trace_checks`, a compiled
+kernel: about 40 us per 512-pixel line, chunks of lines on numba's threads) and the
+row's estimate, so they hold for every estimator:
 
 1. slips: at least :data:`MIN_SLIPS` sudden drops (a run of pixel differences below
    ``-max(3 sqrt(2) sigma, 2 median|dF|)`` adding up to at least a quarter of the line's
@@ -59,7 +59,7 @@ estimator:
    simulated training-like lines, :class:`EmbeddingReference`) -- ``"line unlike the
    training lines"``.
 
-Out of domain, the numbers stay, but the intervals are widened (:func:`widen_row`):
+Out of domain, the numbers stay, but the intervals are widened (:func:`widen_rows`):
 every half-width ``*_lo68/_hi68/_lo95/_hi95`` about the estimate and every ``*_std``
 grows by :data:`WIDEN_FACTOR` (in log space for U0, K and eta, whose intervals are
 log-normal), because the calibration that made them was fitted on lines of the
@@ -72,13 +72,14 @@ the deeper, slower test of whether the PT model describes a trace at all.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping, MutableMapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -100,7 +101,7 @@ WIDEN_FACTOR = 3.0
 MAX_SCORE = 1e3  # domain_score is capped here (an eta of 0 would give infinity)
 #: Checks in the order a tie is reported.
 CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "stick_slip", "embedding")
-#: Estimates whose intervals :func:`widen_row` widens: in nN units, and in V units for
+#: Estimates whose intervals :func:`widen_rows` widens: in nN units, and in V units for
 #: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
 WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
 LINEAR_TARGETS = ("F_mean_nN", VOLT_NAMES["F_mean_nN"])  # the others are log-normal
@@ -157,8 +158,12 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     xm, Gm = np.mean(x), np.mean(G)
     sxx = np.sum((x - xm) ** 2)
     slope = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
-    resid = np.sort(G - slope * (x - xm))
-    span = resid[int(0.98 * (n - 1))] - resid[int(0.02 * (n - 1))]
+    # the 2 % and 98 % order statistics by selection (a full sort costs twice as much)
+    hi, lo = int(0.98 * (n - 1)), int(0.02 * (n - 1))
+    span = 0.0
+    if hi > lo:
+        resid = np.partition(G - slope * (x - xm), hi)
+        span = resid[hi] - np.partition(resid[:hi], lo)[lo]
     d = G[1:] - G[:-1]
     thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * np.median(np.abs(d)), 1e-12)
     min_size = max(0.25 * span, 6.0 * sigma, 1e-12)
@@ -176,16 +181,17 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     out[SPAN] = span
 
 
-@njit(cache=True, error_model="numpy")
-def _check_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    # one thread: ~0.1 ms per 512-pixel line, and it compiles in seconds where a
-    # parallel loop takes minutes
-    n = offsets.size - 1
-    out = np.empty((n, N_FIELDS))
-    for i in range(n):
+@njit(cache=True, nogil=True, error_model="numpy")
+def _check_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, out: np.ndarray) -> None:
+    # serial and without the GIL: trace_checks runs one chunk per thread (a numba
+    # parallel loop over _check_one takes minutes to compile)
+    for i in range(offsets.size - 1):
         lo, hi = offsets[i], offsets[i + 1]
         _check_one(xs[lo:hi], Fs[lo:hi], out[i])
-    return out
+
+
+#: Lines per thread below which :func:`trace_checks` stays on one thread.
+MIN_LINES_PER_THREAD = 256
 
 
 @dataclass
@@ -213,16 +219,32 @@ class TraceChecks:
     span_nN: np.ndarray
 
 
-def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray]) -> TraceChecks:
-    """Slips, rises and slip spacing of each trace (see the module docstring)."""
+def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
+                 threads: int | None = None) -> TraceChecks:  # fmt: skip
+    """Slips, rises and slip spacing of each trace (see the module docstring).
+
+    ``threads``: chunks of lines checked at once, each on its own thread (default:
+    numba's thread count, ``NUMBA_NUM_THREADS``; one per
+    :data:`MIN_LINES_PER_THREAD` lines at most).
+    """
     sizes = np.array([np.asarray(f).size for f in force_nN], np.int64)
-    if sizes.size == 0:
+    n = sizes.size
+    if n == 0:
         e = np.empty(0)
         return TraceChecks(e.astype(int), e.astype(int), e, e, e, e)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     xs = np.concatenate([np.asarray(x, float) for x in x_nm])
     Fs = np.concatenate([np.asarray(f, float) for f in force_nN])
-    out = _check_batch(xs, Fs, offsets)
+    out = np.empty((n, N_FIELDS))
+    threads = numba.get_num_threads() if threads is None else threads
+    chunks = max(1, min(int(threads), n // MIN_LINES_PER_THREAD))
+    cuts = np.linspace(0, n, chunks + 1).astype(int)
+    parts = [(xs, Fs, offsets[a:b + 1], out[a:b]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    if chunks == 1:
+        _check_batch(*parts[0])
+    else:
+        with ThreadPoolExecutor(chunks) as pool:
+            list(pool.map(lambda p: _check_batch(*p), parts))
     return TraceChecks(out[:, N_DROPS].astype(int), out[:, N_RISES].astype(int),
                        out[:, SPACING_MEDIAN], out[:, SPACING_Q25], out[:, NOISE],
                        out[:, SPAN])  # fmt: skip
@@ -231,13 +253,17 @@ def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray]) -> 
 _NAN = float("nan")
 
 
-def _number(row: Mapping[str, Any], key: str) -> float:
-    v = row.get(key)
-    if type(v) is float:  # the usual case, first: this runs ~40 times per row
+def _value(v: Any) -> float:
+    """A row's entry as a float: NaN for missing, non-numeric and boolean entries."""
+    if type(v) is float:  # the usual case, first: this runs for every row and column
         return v
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
         return _NAN
     return _NAN if is_missing(v) else float(v)
+
+
+def _number(row: Mapping[str, Any], key: str) -> float:
+    return _value(row.get(key))
 
 
 def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
@@ -254,32 +280,54 @@ def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
     return eta, eta
 
 
-def check_ratios(checks: TraceChecks, i: int, lattice_nm: float, row: Mapping[str, Any],
-                 eta_edge: float = ETA_WINDOW[0]) -> dict[str, float]:  # fmt: skip
-    """Each check of trace ``i`` (:data:`CHECKS`) as statistic / limit: fails above 1.
-    A check that cannot be made (no eta, fewer than two slips for the spacing) is left
-    out; ``eta_edge`` is the least estimate of eta kept in domain."""
-    nd, nr = int(checks.n_drops[i]), int(checks.n_rises[i])
-    out = {"slips": MIN_SLIPS / max(nd, 0.5)}
-    if nr > 0:
-        out["direction"] = nr / max(nd, 0.5) / MAX_RISE_FRACTION
-    q25 = checks.spacing_q25_nm[i]
-    if np.isfinite(q25) and q25 > 0 and lattice_nm > 0:
-        out["spacing"] = MIN_SPACING * lattice_nm / q25
-    lo, hi = eta_bounds(row)
-    eta = _number(row, "eta")
-    if np.isfinite(hi):
-        out["eta_low"] = ETA_WINDOW[0] / hi if hi > 0 else np.inf
-    if eta_edge > ETA_WINDOW[0] and np.isfinite(eta):
-        edge = eta_edge / eta if eta > 0 else np.inf
-        out["eta_low"] = max(out.get("eta_low", 0.0), edge)
-    if np.isfinite(lo):
-        out["eta_high"] = lo / ETA_WINDOW[1]
-    if row.get("stick_slip_check") and np.isfinite(eta):
-        out["stick_slip"] = ETA_CONFIRM / eta if eta > 0 else np.inf
-    emb = _number(row, "domain_embedding")
-    if np.isfinite(emb):
-        out["embedding"] = emb
+def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
+    """One column of the rows as floats (:func:`_value`)."""
+    vals = [r.get(key) for r in rows]
+    if all(type(v) is float for v in vals):  # the usual cases, without a call per row
+        return np.array(vals, float)
+    if all(v is None for v in vals):
+        return np.full(len(vals), _NAN)
+    return np.array([_value(v) for v in vals], float)
+
+
+def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
+                 rows: Sequence[Mapping[str, Any]],
+                 eta_edge: float = ETA_WINDOW[0]) -> dict[str, np.ndarray]:  # fmt: skip
+    """Each check (:data:`CHECKS`) of every trace as statistic / limit: fails above 1.
+
+    ``rows[i]`` is trace ``i``'s estimate and ``lattice_nm[i]`` its lattice. Returns an
+    array of length N per check, NaN where the check cannot be made (no eta, fewer than
+    two slips for the spacing, no sudden rise, no embedding); ``eta_edge`` is the least
+    estimate of eta kept in domain.
+    """
+    lattice_nm = np.asarray(lattice_nm, float)
+    nd = checks.n_drops.astype(float)
+    nr = checks.n_rises.astype(float)
+    nan = np.full(nd.size, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = {"slips": MIN_SLIPS / np.maximum(nd, 0.5)}
+        out["direction"] = np.where(nr > 0, nr / np.maximum(nd, 0.5) / MAX_RISE_FRACTION, nan)
+        q25 = checks.spacing_q25_nm
+        ok = np.isfinite(q25) & (q25 > 0) & (lattice_nm > 0)
+        out["spacing"] = np.where(ok, MIN_SPACING * lattice_nm / q25, nan)
+        eta = _column(rows, "eta")
+        lo, hi = _column(rows, "eta_lo95"), _column(rows, "eta_hi95")
+        sd = _column(rows, "eta_std")
+        has_iv = np.isfinite(lo) & np.isfinite(hi)  # eta_bounds, for every row at once
+        has_sd = ~has_iv & np.isfinite(sd)
+        lo = np.where(has_iv, lo, np.where(has_sd, eta - 2.0 * sd, eta))
+        hi = np.where(has_iv, hi, np.where(has_sd, eta + 2.0 * sd, eta))
+        low = np.where(np.isfinite(hi), np.where(hi > 0, ETA_WINDOW[0] / hi, np.inf), nan)
+        if eta_edge > ETA_WINDOW[0]:
+            edge = np.where(eta > 0, eta_edge / eta, np.inf)
+            low = np.where(np.isfinite(eta), np.fmax(np.nan_to_num(low, nan=0.0), edge), low)
+        out["eta_low"] = low
+        out["eta_high"] = np.where(np.isfinite(lo), lo / ETA_WINDOW[1], nan)
+        flagged = np.array([bool(r.get("stick_slip_check")) for r in rows], bool)
+        confirm = np.where(eta > 0, ETA_CONFIRM / eta, np.inf)
+        out["stick_slip"] = np.where(flagged & np.isfinite(eta), confirm, nan)
+        emb = _column(rows, "domain_embedding")
+        out["embedding"] = np.where(np.isfinite(emb), emb, nan)
     return out
 
 
@@ -326,39 +374,50 @@ def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> No
     the std is then that of the log-normal with the widened 68 % interval, as the line
     model defines it (without a 68 % interval, the std grows by ``factor``).
     """
-    # plain floats and math: this runs on every out-of-domain row
-    model_sd = _number(row, "F_model_std_nN")  # the pairs' std (estimators.pairs)
-    if math.isfinite(model_sd):
-        row["F_model_std_nN"] = factor * model_sd
-    for k in WIDENED:
-        m = _number(row, k)
-        if not math.isfinite(m):
-            continue
-        log = k not in LINEAR_TARGETS and m > 0
-        for b in BOUNDS:
-            v = _number(row, f"{k}_{b}")
-            if not math.isfinite(v):
+    widen_rows([row], factor)
+
+
+def _put(rows: Sequence[MutableMapping[str, Any]], key: str, values: np.ndarray,
+         where: np.ndarray) -> None:  # fmt: skip
+    vals = values.tolist()  # Python floats
+    for j in np.flatnonzero(where).tolist():
+        rows[j][key] = vals[j]
+
+
+def widen_rows(rows: Sequence[MutableMapping[str, Any]], factor: float = WIDEN_FACTOR) -> None:
+    """:func:`widen_row` on every row, one column at a time (out-of-domain rows can be
+    most of a table: a user's whole file at a wrong lattice)."""
+    if not rows:
+        return
+    model_sd = _column(rows, "F_model_std_nN")  # the pairs' std (estimators.pairs)
+    _put(rows, "F_model_std_nN", factor * model_sd, np.isfinite(model_sd))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for k in WIDENED:
+            m = _column(rows, k)
+            has = np.isfinite(m)
+            if not has.any():
                 continue
-            if log and v > 0:
-                row[f"{k}_{b}"] = m * (v / m) ** factor
-            elif not log:
-                row[f"{k}_{b}"] = m + factor * (v - m)
-        sd = _number(row, f"{k}_std")
-        if not math.isfinite(sd):
-            continue
-        lo, hi = _number(row, f"{k}_lo68"), _number(row, f"{k}_hi68")
-        if log and math.isfinite(lo) and math.isfinite(hi) and lo > 0:
-            e = math.log(hi / lo) / (2.0 * Z68)
-            row[f"{k}_std"] = m * math.sqrt(math.expm1(e * e) * math.exp(e * e))
-        else:
-            row[f"{k}_std"] = factor * sd
+            log = (k not in LINEAR_TARGETS) & (m > 0)
+            for b in BOUNDS:
+                v = _column(rows, f"{k}_{b}")
+                ok = has & np.isfinite(v)
+                new = np.where(log, m * (v / m) ** factor, m + factor * (v - m))
+                # a log-normal bound at or below 0 cannot be widened in log space
+                _put(rows, f"{k}_{b}", new, ok & ~(log & ~(v > 0)))
+            sd = _column(rows, f"{k}_std")
+            ok = has & np.isfinite(sd)
+            lo, hi = _column(rows, f"{k}_lo68"), _column(rows, f"{k}_hi68")  # widened
+            from68 = log & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
+            e = np.log(hi / lo) / (2.0 * Z68)
+            lognormal = m * np.sqrt(np.expm1(e * e) * np.exp(e * e))
+            _put(rows, f"{k}_std", np.where(from68, lognormal, factor * sd), ok)
 
 
 def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
            force_nN: Sequence[np.ndarray], lattice_nm: Sequence[float],
            widen: bool = True, eta_edge: float = ETA_WINDOW[0]) -> None:  # fmt: skip
     """Add ``in_domain``, ``domain_score``, ``domain_reason`` to every row (in place) and,
-    with ``widen``, widen the intervals of the rows out of domain (:func:`widen_row`).
+    with ``widen``, widen the intervals of the rows out of domain (:func:`widen_rows`).
 
     ``rows[i]`` is the row of the trace ``(x_nm[i], force_nN[i])`` read at lattice
     ``lattice_nm[i]``; rows without an estimate (``quality`` other than ``ok``) are out
@@ -367,22 +426,31 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
     an eta below their window).
     """
     todo = [i for i, r in enumerate(rows) if r.get("quality") == OK]
-    checks = trace_checks([x_nm[i] for i in todo], [force_nN[i] for i in todo])
     for r in rows:
         if r.get("quality") != OK:
             r.update(in_domain=False, domain_score=None,
                      domain_reason=f"no estimate: {r.get('quality')}")  # fmt: skip
-    for j, i in enumerate(todo):
-        row, a = rows[i], float(lattice_nm[i])
-        ratios = check_ratios(checks, j, a, row, eta_edge)
-        failed = sorted((k for k, v in ratios.items() if v > 1.0),
-                        key=lambda k: (-ratios[k], CHECKS.index(k)))  # fmt: skip
-        row["in_domain"] = not failed
-        row["domain_score"] = float(min(max(ratios.values()), MAX_SCORE))
-        row["domain_reason"] = "; ".join(reason(k, checks, j, a, row, eta_edge)
-                                         for k in failed) or None  # fmt: skip
-        if failed and widen:
-            widen_row(row)
+    if not todo:
+        return
+    checks = trace_checks([x_nm[i] for i in todo], [force_nN[i] for i in todo])
+    done = [rows[i] for i in todo]
+    lattice = [float(lattice_nm[i]) for i in todo]
+    ratios = check_ratios(checks, np.array(lattice), done, eta_edge)
+    table = np.column_stack([ratios[k] for k in CHECKS])  # (N, checks), NaN: not made
+    with np.errstate(invalid="ignore"):
+        failing = table > 1.0
+    score = np.minimum(np.nanmax(np.where(np.isnan(table), -np.inf, table), axis=1),
+                       MAX_SCORE)  # fmt: skip
+    # failed checks worst first (a stable sort: a tie goes in the order of CHECKS)
+    order = np.argsort(np.where(failing, -table, np.inf), axis=1, kind="stable").tolist()
+    n_failed = failing.sum(axis=1).tolist()
+    for j, (row, nf, sc) in enumerate(zip(done, n_failed, score.tolist(), strict=True)):
+        row["in_domain"] = nf == 0
+        row["domain_score"] = sc
+        row["domain_reason"] = "; ".join(reason(CHECKS[c], checks, j, lattice[j], row, eta_edge)
+                                         for c in order[j][:nf]) or None  # fmt: skip
+    if widen:
+        widen_rows([row for row in done if not row["in_domain"]])
 
 
 @dataclass

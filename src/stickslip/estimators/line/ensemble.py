@@ -176,19 +176,34 @@ class LineCNN(nn.Module):
         mean, log_var, _ = self.parts(x, cond, expert)
         return mean, log_var
 
-    def parts(
-        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Mean, log-variance and the CNN's own (ungated) mean: training fits the own mean
-        too, so that it stays an estimate of the targets rather than a correction that
-        only makes sense mixed with the expert's."""
+    @property
+    def n_features(self) -> int:
+        """Width of :meth:`features`: what the head reads for each line."""
+        return self.head[0].in_features
+
+    def features(self, x: torch.Tensor, cond: torch.Tensor,
+                 expert: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
+        """What the head reads (B, :attr:`n_features`): the CNN's mean- and max-pooled
+        channels, the conditioning and the expert inputs."""
         h = self.body(x)
         parts = [h.mean(-1), h.amax(-1), cond]
         if self.n_expert:
             if expert is None:
                 raise ValueError("this network reads expert inputs: pass expert=")
             parts.append(expert)
-        features = torch.cat(parts, dim=1)
+        return torch.cat(parts, dim=1)
+
+    def parts(
+        self, x: torch.Tensor, cond: torch.Tensor, expert: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, log-variance and the CNN's own (ungated) mean: training fits the own mean
+        too, so that it stays an estimate of the targets rather than a correction that
+        only makes sense mixed with the expert's."""
+        return self.heads(self.features(x, cond, expert), expert)
+
+    def heads(self, features: torch.Tensor, expert: torch.Tensor | None = None
+              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # fmt: skip
+        """:meth:`parts` from the head's inputs (:meth:`features`)."""
         out = self.head(features)
         t = self.n_targets
         own = out[:, :t]
@@ -296,9 +311,15 @@ class LineEnsemble:
         return expert_inputs(self.expert, X, self.spec, self.y_mean, self.y_std)
 
     @torch.inference_mode()
-    def predict_std(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    def predict_std(self, X: torch.Tensor, C: torch.Tensor, features: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """Predictive mean and calibrated std in standardised target units (B, n_targets);
-        the central interval at level ``q`` is ``mean +- z_at(q) * std``."""
+        the central interval at level ``q`` is ``mean +- z_at(q) * std``.
+
+        ``features``: an array (members, B, :attr:`LineCNN.n_features`) to fill with what
+        each member's head read for each line (the domain verdict's embedding), at no
+        extra cost.
+        """
         # batch norm folded, and chunks small enough for the activations to stay in
         # cache: about 5x faster on a CPU than one big batch
         fused = [m.fused() for m in self.members]
@@ -308,7 +329,11 @@ class LineEnsemble:
         for k, m in enumerate(fused):
             for i in range(0, X.shape[0], INFER_CHUNK):
                 sl = slice(i, i + INFER_CHUNK)
-                mu, lv = m(X[sl], C[sl], None if E is None else E[sl])
+                e = None if E is None else E[sl]
+                f = m.features(X[sl], C[sl], e)
+                if features is not None:
+                    features[k, sl] = f.numpy()
+                mu, lv, _ = m.heads(f, e)
                 means[k, sl] = mu.numpy()
                 variances[k, sl] = lv.exp().numpy()
         sd = np.sqrt(np.mean(variances, axis=0) + means.var(axis=0))
@@ -345,12 +370,16 @@ class LinePrediction:
     #: std of the model's own <F> error, without the offset term (what a trace/retrace
     #: pair, which cancels the offset, is left with)
     F_model_std: np.ndarray | None = None
+    #: what each member's head read for each line, (members, N, D), when asked for
+    features: np.ndarray | None = None
 
 
 def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
-                      batch: int = 2048) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+                      batch: int = 2048, features: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Standardised predictive mean and std (N, n_targets) of mapped lines, each read
-    whole: lines of equal length are batched together."""
+    whole: lines of equal length are batched together. ``features``: an array (members,
+    N, D) to fill with the head's inputs (:meth:`LineEnsemble.predict_std`)."""
     n = len(lines)
     mu = np.empty((n, len(TARGETS)))
     sd = np.empty((n, len(TARGETS)))
@@ -360,7 +389,11 @@ def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Te
         for start in range(0, idx.size, batch):
             sel = idx[start : start + batch]
             X = line_inputs([lines[i] for i in sel], ens.spec)
-            mu[sel], sd[sel] = ens.predict_std(X, cond[sel])
+            part = None if features is None else np.empty(
+                (features.shape[0], sel.size, features.shape[2]), features.dtype)  # fmt: skip
+            mu[sel], sd[sel] = ens.predict_std(X, cond[sel], part)
+            if features is not None:
+                features[:, sel] = part
     return mu, sd
 
 
@@ -371,22 +404,26 @@ def predict_lines(
     velocity_nm_per_s: np.ndarray,
     trace_mean_nN: np.ndarray,
     batch: int = 2048,
+    features: bool = False,
 ) -> LinePrediction:
     """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity.
 
     ``trace_mean_nN`` is each trace's own mean force (on its original samples), to which
     the predicted friction correction is added. Lines of equal length are batched
-    together; each is read whole (no crop).
+    together; each is read whole (no crop). With ``features``, the prediction also
+    carries what each member's head read (:attr:`LinePrediction.features`).
     """
     n = len(lines)
     a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
     v = np.broadcast_to(np.asarray(velocity_nm_per_s, float), (n,))
-    mu, sd = predict_std_lines(ens, lines, conditioning(a, v, ens.spec), batch)
+    feats = np.empty((len(ens.members), n, ens.members[0].n_features), np.float32) \
+        if features else None
+    mu, sd = predict_std_lines(ens, lines, conditioning(a, v, ens.spec), batch, feats)
     mu, sd = mu * ens.y_std + ens.y_mean, sd * ens.y_std
     s = a / ens.spec.lattice_nm
     shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
     z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
-    out = LinePrediction({}, {}, {}, {}, {}, {})
+    out = LinePrediction({}, {}, {}, {}, {}, {}, features=feats)
     for j, name in enumerate(("F_mean_nN", "U0_eV", "K_N_m", "eta")):
         m, h68, h95 = mu[:, j], z68[j] * sd[:, j], z95[j] * sd[:, j]
         e = h68 / Z68  # std of the Gaussian with this 68 % interval
@@ -414,8 +451,10 @@ def predict_raw_lines(
     force_nN: list[np.ndarray],
     lattice_nm: np.ndarray,
     velocity_nm_per_s: np.ndarray,
+    features: bool = False,
 ) -> LinePrediction:
-    """Map traces of any pixel size and lattice (see :func:`map_line`), then predict.
+    """Map traces of any pixel size and lattice (see :func:`map_line`), then predict
+    (:func:`predict_lines`; ``features``: also what the members' heads read).
 
     Raises
     ------
@@ -429,4 +468,4 @@ def predict_raw_lines(
     if short:
         raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
     means = np.array([np.mean(f) for f in force_nN])
-    return predict_lines(ens, lines, a, velocity_nm_per_s, means)
+    return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features)

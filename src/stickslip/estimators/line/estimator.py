@@ -11,7 +11,7 @@ import numpy as np
 
 from stickslip.conditions import Conditions
 from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.classical.estimator import QUALITY, STATUS, estimate_array
 from stickslip.estimators.domain import ETA_CONFIRM, ETA_EDGE, EmbeddingReference
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
@@ -45,59 +45,13 @@ def bundled_reference() -> EmbeddingReference | None:
 def pooled_features(ens: LineEnsemble, x_nm: Sequence[np.ndarray],
                     force_nN: Sequence[np.ndarray], lattice_nm: np.ndarray,
                     velocity_nm_per_s: np.ndarray
-                    ) -> tuple[LinePrediction, np.ndarray | None]:  # fmt: skip
+                    ) -> tuple[LinePrediction, np.ndarray]:  # fmt: skip
     """:func:`predict_raw_lines`, and what each member's head read for each line (the
-    pooled CNN features, conditioning and expert inputs), (members, N, D).
-
-    The features are caught on their way into each member's head during the one forward
-    pass, so they cost nothing. Traces are predicted in groups that map to lines of one
-    length (same samples, pixel and lattice), in which the members read the lines in
-    input order; features are None if a group's count does not match (never expected).
-    """
-    n = len(force_nN)
-    groups: dict[tuple[int, float, float], list[int]] = {}
-    for i in range(n):
-        x = np.asarray(x_nm[i])
-        pixel = (x[-1] - x[0]) / max(x.size - 1, 1)
-        groups.setdefault((x.size, round(float(pixel), 12), round(float(lattice_nm[i]), 12)),
-                          []).append(i)  # fmt: skip
-    caught: list[list[np.ndarray]] = [[] for _ in ens.members]
-
-    def catcher(k: int):
-        def hook(module, inputs) -> None:
-            caught[k].append(inputs[0].detach().numpy().copy())
-        return hook
-
-    handles = [m.head.register_forward_pre_hook(catcher(k)) for k, m in enumerate(ens.members)]
-    parts: list[tuple[list[int], LinePrediction, np.ndarray | None]] = []
-    try:
-        for idx in groups.values():
-            for c in caught:
-                c.clear()
-            pred = predict_raw_lines(ens, [x_nm[i] for i in idx], [force_nN[i] for i in idx],
-                                     lattice_nm[idx], velocity_nm_per_s[idx])  # fmt: skip
-            feats = None
-            if all(c and sum(len(a) for a in c) == len(idx) for c in caught):
-                feats = np.stack([np.concatenate(c) for c in caught])
-            parts.append((idx, pred, feats))
-    finally:
-        for h in handles:
-            h.remove()
-    if len(parts) == 1 and parts[0][0] == list(range(n)):
-        return parts[0][1], parts[0][2]
-    out = LinePrediction({}, {}, {}, {}, {}, {})
-    for field in ("values", "std", *BOUNDS):
-        for k in TARGETS:
-            arr = np.empty(n)
-            for idx, pred, _ in parts:
-                arr[idx] = getattr(pred, field)[k]
-            getattr(out, field)[k] = arr
-    feats = None
-    if all(f is not None for _, _, f in parts):
-        feats = np.empty((len(ens.members), n, parts[0][2].shape[-1]))
-        for idx, _, f in parts:
-            feats[:, idx] = f
-    return out, feats
+    pooled CNN features, conditioning and expert inputs), (members, N, D), taken from
+    the same forward pass."""
+    pred = predict_raw_lines(ens, list(x_nm), list(force_nN), lattice_nm, velocity_nm_per_s,
+                             features=True)  # fmt: skip
+    return pred, pred.features
 
 
 class LineEstimator(TraceEstimator):
@@ -156,7 +110,7 @@ class LineEstimator(TraceEstimator):
                              "reads the traces and the estimates only")  # fmt: skip
         else:
             pred, feats = pooled_features(self.ensemble, *args)
-            dist = None if feats is None else ref.distance(feats)
+            dist = ref.distance(feats)
         for j, i in enumerate(ok):
             row: dict[str, Any] = {k: float(pred.values[k][j]) for k in TARGETS}
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
@@ -180,9 +134,12 @@ class LineEstimator(TraceEstimator):
                if isinstance(r, dict) and r["eta"] < ETA_CONFIRM]  # fmt: skip
         if not low:
             return
-        classical = ClassicalEstimator(reference=self.reference)
-        done, _ = classical.estimate([traces[i] for i in low], [conditions[i] for i in low])
-        for i, res in zip(low, done, strict=True):
-            quality = res if isinstance(res, str) else res["quality"]
-            if quality != OK:
-                rows[i]["stick_slip_check"] = quality  # type: ignore[index]
+        # the classical kernel alone: its quality flag is all the check needs
+        c = [conditions[i] for i in low]
+        table = estimate_array([traces[i].x_nm for i in low], [traces[i].force_nN for i in low],
+                               np.array([x.lattice_nm for x in c]),
+                               np.array([x.temperature_K for x in c]),
+                               np.array([x.velocity_nm_per_s for x in c]))  # fmt: skip
+        for i, status in zip(low, table[:, STATUS].astype(int), strict=True):
+            if QUALITY[status] != OK:
+                rows[i]["stick_slip_check"] = QUALITY[status]  # type: ignore[index]
