@@ -104,6 +104,15 @@ def test_eta_outside_the_trained_window_is_judged_on_the_estimates_interval():
     assert high["domain_reason"].startswith("eta above the trained window")
 
 
+def test_an_eta_of_zero_is_out_of_domain_at_the_capped_score():
+    for edge in (D.ETA_WINDOW[0], D.ETA_EDGE):
+        r = row(eta=0.0, lo=None)
+        assess([r], [X], [sawtooth()], [A], eta_edge=edge)
+        assert r["in_domain"] is False
+        assert r["domain_score"] == D.MAX_SCORE
+        assert r["domain_reason"].startswith("eta below the trained window")
+
+
 def test_the_embedding_distance_counts_when_a_row_has_one():
     r = judge(sawtooth(), {**row(), "domain_embedding": 2.5})
     assert r["in_domain"] is False

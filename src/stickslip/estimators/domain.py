@@ -320,7 +320,7 @@ def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
         low = np.where(np.isfinite(hi), np.where(hi > 0, ETA_WINDOW[0] / hi, np.inf), nan)
         if eta_edge > ETA_WINDOW[0]:
             edge = np.where(eta > 0, eta_edge / eta, np.inf)
-            low = np.where(np.isfinite(eta), np.fmax(np.nan_to_num(low, nan=0.0), edge), low)
+            low = np.where(np.isfinite(eta), np.fmax(np.where(np.isnan(low), 0.0, low), edge), low)
         out["eta_low"] = low
         out["eta_high"] = np.where(np.isfinite(lo), lo / ETA_WINDOW[1], nan)
         flagged = np.array([bool(r.get("stick_slip_check")) for r in rows], bool)
