@@ -38,9 +38,13 @@ U0 and K relative RMSE, <F> RMSE, and the fraction in domain.
 ``--write PATH`` saves the model calibrated on every family (the bundled model's
 calibration is made this way: ``--write src/stickslip/resources/line_model.pt``).
 
+``--eval-seed S`` (default 601) evaluates on another pool, with every evaluation draw's
+seed moved by 1000 (S - 601): a second evaluation independent of the first. ``--only f
+...`` limits the "with f" sets and leave-one-family-out to those families.
+
 Usage: python benchmarks/families.py [--work build/families] [--n-cal 600] [--n-eval 400]
        [--draws 4] [--n-bench 120] [--line-model PATH] [--no-lofo] [--write PATH]
-       [--threads 2]
+       [--threads 2] [--eval-seed 601] [--only FAMILY ...] [--no-pairs]
 """
 
 from __future__ import annotations
@@ -177,21 +181,32 @@ def main() -> None:
     ap.add_argument("--n-bench", type=int, default=120,
                     help="lab-bench lines per material (0: no bench)")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--eval-seed", type=int, default=EVAL_SEED,
+                    help="seed of the evaluation pool; another one also moves every "
+                         "evaluation draw's seed (a second, independent evaluation)")  # fmt: skip
+    ap.add_argument("--only", nargs="+", choices=fx.FAMILIES, default=None,
+                    help="the 'with f' sets and leave-one-family-out for these families only")
+    ap.add_argument("--no-pairs", action="store_true", help="skip the trace/retrace pairs")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    # evaluation draws: the documented seeds for the documented pool, others beside them
+    shift = 1000 * (args.eval_seed - EVAL_SEED)
+    all_seed, with_seed, pair_seed = ALL_SEED + shift, WITH_SEED + shift, PAIR_SEED + shift
+    families = args.only or list(fx.FAMILIES)
     args.work.mkdir(parents=True, exist_ok=True)
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}; torch threads {args.threads}")  # fmt: skip
     cal_pool = cached_randomised_set(RandomisedConfig(n=args.n_cal, seed=CAL_SEED, chunk=100),
                                      args.work)  # fmt: skip
-    eval_pool = cached_randomised_set(RandomisedConfig(n=args.n_eval, seed=EVAL_SEED, chunk=100),
-                                      args.work)  # fmt: skip
+    eval_pool = cached_randomised_set(RandomisedConfig(n=args.n_eval, seed=args.eval_seed,
+                                                       chunk=100), args.work)  # fmt: skip
     prior = fx.NuisancePrior()
     sets = {"clean": eval_pool,
-            "all families": draw_family_lines(eval_pool, prior, ALL_SEED).data}  # fmt: skip
+            "all families": draw_family_lines(eval_pool, prior, all_seed).data}  # fmt: skip
     for j, f in enumerate(fx.FAMILIES):
-        sets[f"with {f}"] = draw_family_lines(eval_pool, prior.replace(f, p=1.0),
-                                              WITH_SEED + j).data  # fmt: skip
+        if f in families:
+            sets[f"with {f}"] = draw_family_lines(eval_pool, prior.replace(f, p=1.0),
+                                                  with_seed + j).data  # fmt: skip
     if args.n_bench:
         # the lab bench (older lab effects, three materials) with a seed of its own
         cfg = BenchConfig(n_per_material=args.n_bench, seed=BENCH_SEED + 3)
@@ -217,8 +232,9 @@ def main() -> None:
             r = score(est, data)
             summary[label][name] = r
             print(line(name, r), flush=True)
-    for name, pair_prior in (("pairs", prior), ("lab_pairs", lab_prior(prior))):
-        t_rows, r_rows = pair_rows(eval_pool, pair_prior, PAIR_SEED)
+    pair_sets = () if args.no_pairs else (("pairs", prior), ("lab_pairs", lab_prior(prior)))
+    for name, pair_prior in pair_sets:
+        t_rows, r_rows = pair_rows(eval_pool, pair_prior, pair_seed)
         pairs = score_pairs(LineEstimator(families_ens, source), t_rows, r_rows)
         summary[name] = pairs
         what = ("every family" if name == "pairs" else
@@ -229,7 +245,7 @@ def main() -> None:
               f"nN, its 95 % coverage {pairs['pair_coverage95']:.3f}")  # fmt: skip
     if not args.no_lofo:
         print(f"\nleave-one-family-out: calibrated without f, scored on 'with f'\n{HEAD}")
-        for f in fx.FAMILIES:
+        for f in families:
             ens = copy.deepcopy(shipped)
             calibrate_on_families(ens, cal_pool,
                                   FamilyCalibration(prior=prior.without(f), draws=args.draws,
