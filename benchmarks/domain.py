@@ -350,12 +350,12 @@ def main() -> None:
     if args.write_reference:
         write_reference(args.work, ROOT / "src" / "stickslip" / "resources" / "line_domain.npz")
         return
-    import stickslip.estimators.line.estimator as line_estimator
+    import stickslip.estimators.domain as domain
     from stickslip.estimators.classical.estimator import ClassicalEstimator
     from stickslip.estimators.load import load_estimator
 
     if args.eta_confirm is not None:
-        line_estimator.ETA_CONFIRM = args.eta_confirm
+        domain.ETA_CONFIRM = args.eta_confirm  # the line model's check and the verdict read it
     line = load_estimator(None)
     if args.speed_only:
         speed(line, args.n_speed, args.repeats, args.work)

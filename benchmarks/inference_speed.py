@@ -34,17 +34,6 @@ from stickslip.estimators.window.inference import predict_array
 from stickslip.traces.trace import Trace
 
 
-def best_of(repeats: int, call) -> float:
-    """The shortest wall time of ``repeats`` calls (after one warm-up call)."""
-    call()
-    best = np.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        call()
-        best = min(best, time.perf_counter() - t)
-    return best
-
-
 def best_of_each(repeats: int, calls: dict) -> dict[str, float]:
     """The shortest wall time of each call over ``repeats`` rounds, the calls taken in
     turn within each round (after one warm-up round)."""
@@ -56,6 +45,11 @@ def best_of_each(repeats: int, calls: dict) -> dict[str, float]:
             if r:
                 best[what] = min(best[what], time.perf_counter() - t)
     return best
+
+
+def best_of(repeats: int, call) -> float:
+    """The shortest wall time of ``repeats`` calls (after one warm-up call)."""
+    return best_of_each(repeats, {"call": call})["call"]
 
 
 def kernel(estimator, force: np.ndarray, x: np.ndarray, a: float):

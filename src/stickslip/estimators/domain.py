@@ -266,20 +266,6 @@ def _number(row: Mapping[str, Any], key: str) -> float:
     return _value(row.get(key))
 
 
-def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
-    """The range of eta a row's estimate allows: its 95 % interval, else
-    ``eta +- 2 eta_std`` (an ``eta_std`` may be a spread over slips or windows), else the
-    value itself."""
-    eta = _number(row, "eta")
-    lo, hi = _number(row, "eta_lo95"), _number(row, "eta_hi95")
-    if np.isfinite(lo) and np.isfinite(hi):
-        return lo, hi
-    sd = _number(row, "eta_std")
-    if np.isfinite(sd):
-        return eta - 2.0 * sd, eta + 2.0 * sd
-    return eta, eta
-
-
 def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
     """One column of the rows as floats (:func:`_value`)."""
     vals = [r.get(key) for r in rows]
@@ -288,6 +274,26 @@ def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
     if all(v is None for v in vals):
         return np.full(len(vals), _NAN)
     return np.array([_value(v) for v in vals], float)
+
+
+def eta_bounds_columns(rows: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
+    """The range of eta each row's estimate allows: its 95 % interval, else
+    ``eta +- 2 eta_std`` (an ``eta_std`` may be a spread over slips or windows), else the
+    value itself. Arrays (lo, hi) of length N."""
+    eta = _column(rows, "eta")
+    lo, hi = _column(rows, "eta_lo95"), _column(rows, "eta_hi95")
+    sd = _column(rows, "eta_std")
+    has_iv = np.isfinite(lo) & np.isfinite(hi)
+    has_sd = ~has_iv & np.isfinite(sd)
+    lo = np.where(has_iv, lo, np.where(has_sd, eta - 2.0 * sd, eta))
+    hi = np.where(has_iv, hi, np.where(has_sd, eta + 2.0 * sd, eta))
+    return lo, hi
+
+
+def eta_bounds(row: Mapping[str, Any]) -> tuple[float, float]:
+    """:func:`eta_bounds_columns` of one row."""
+    lo, hi = eta_bounds_columns([row])
+    return float(lo[0]), float(hi[0])
 
 
 def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
@@ -311,12 +317,7 @@ def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
         ok = np.isfinite(q25) & (q25 > 0) & (lattice_nm > 0)
         out["spacing"] = np.where(ok, MIN_SPACING * lattice_nm / q25, nan)
         eta = _column(rows, "eta")
-        lo, hi = _column(rows, "eta_lo95"), _column(rows, "eta_hi95")
-        sd = _column(rows, "eta_std")
-        has_iv = np.isfinite(lo) & np.isfinite(hi)  # eta_bounds, for every row at once
-        has_sd = ~has_iv & np.isfinite(sd)
-        lo = np.where(has_iv, lo, np.where(has_sd, eta - 2.0 * sd, eta))
-        hi = np.where(has_iv, hi, np.where(has_sd, eta + 2.0 * sd, eta))
+        lo, hi = eta_bounds_columns(rows)
         low = np.where(np.isfinite(hi), np.where(hi > 0, ETA_WINDOW[0] / hi, np.inf), nan)
         if eta_edge > ETA_WINDOW[0]:
             edge = np.where(eta > 0, eta_edge / eta, np.inf)
@@ -439,8 +440,7 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
     table = np.column_stack([ratios[k] for k in CHECKS])  # (N, checks), NaN: not made
     with np.errstate(invalid="ignore"):
         failing = table > 1.0
-    score = np.minimum(np.nanmax(np.where(np.isnan(table), -np.inf, table), axis=1),
-                       MAX_SCORE)  # fmt: skip
+    score = np.minimum(np.where(np.isnan(table), -np.inf, table).max(axis=1), MAX_SCORE)
     # failed checks worst first (a stable sort: a tie goes in the order of CHECKS)
     order = np.argsort(np.where(failing, -table, np.inf), axis=1, kind="stable").tolist()
     n_failed = failing.sum(axis=1).tolist()

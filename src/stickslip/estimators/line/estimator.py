@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 
 from stickslip.conditions import Conditions
+from stickslip.estimators import domain
 from stickslip.estimators.base import TraceEstimator
 from stickslip.estimators.classical.estimator import QUALITY, STATUS, estimate_array
-from stickslip.estimators.domain import ETA_CONFIRM, ETA_EDGE, EmbeddingReference
+from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
@@ -130,8 +131,9 @@ class LineEstimator(TraceEstimator):
         """Rows whose eta is below :data:`~stickslip.estimators.domain.ETA_CONFIRM` get
         the classical estimator's refusal of their line in ``stick_slip_check`` (the
         verdict's stick-slip check); lines it answers, and other rows, get nothing."""
+        # read at call time: the verdict's ratio uses the same module value
         low = [i for i, r in enumerate(rows)
-               if isinstance(r, dict) and r["eta"] < ETA_CONFIRM]  # fmt: skip
+               if isinstance(r, dict) and r["eta"] < domain.ETA_CONFIRM]  # fmt: skip
         if not low:
             return
         # the classical kernel alone: its quality flag is all the check needs
