@@ -40,6 +40,9 @@ DEPTH_QUANTILE = 75.0  # depth percentile of the events that must reach half the
 BEND_FRACTION = 0.15  # guard-pixel deficit, in units of the fitted rise, that flags a bend
 BLOCKS_PER_CYCLE = 8  # the noise of D_w is measured on w-blocks only up to cycle / this
 FINE_CYCLE = 128  # ... on lines of fewer samples per cycle; finer ones on every w-block
+COARSE_CYCLE = 16  # lines of fewer samples per cycle may take their slips from the cycles
+COARSE_DROP_SIGMAS = 5.0  # ... if the drops stand this far above the sticks' noise
+COARSE_ASYMMETRY = 1.4  # ... and the steepest fall beats the stick's steepest rise so
 
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
@@ -242,10 +245,13 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
 
 
 @njit(cache=True, error_model="numpy")
-def _cycles(x: np.ndarray, G: np.ndarray) -> int:
-    """Stick-slip cycles of a trace: falls of the linearly detrended force from above
-    its 75th to below its 25th percentile (a Schmitt trigger, blind to noise smaller
-    than half the force range)."""
+def _schmitt_falls(x: np.ndarray, G: np.ndarray, out: np.ndarray) -> int:
+    """Falls of the linearly detrended force from above its 75th to below its 25th
+    percentile (a Schmitt trigger, blind to noise smaller than half the force range).
+
+    Rows of ``out``: the last sample at or above the 75th percentile before the fall and
+    the first at or below the 25th. Returns the number of falls.
+    """
     n = G.size
     if n < 4:
         return 0
@@ -257,14 +263,122 @@ def _cycles(x: np.ndarray, G: np.ndarray) -> int:
     lo = np.percentile(r, 25.0)
     hi = np.percentile(r, 75.0)
     high = r[0] >= hi
+    last_high = 0
     k = 0
     for i in range(1, n):
-        if high and r[i] <= lo:
+        if r[i] >= hi:
+            high = True
+            last_high = i
+        elif high and r[i] <= lo:
+            out[k, 0] = last_high
+            out[k, 1] = i
             k += 1
             high = False
-        elif not high and r[i] >= hi:
-            high = True
     return k
+
+
+@njit(cache=True, error_model="numpy")
+def _cycles(x: np.ndarray, G: np.ndarray) -> int:
+    """Stick-slip cycles of a trace: the Schmitt trigger's falls (:func:`_schmitt_falls`)."""
+    return _schmitt_falls(x, G, np.empty((G.size, 2), dtype=np.int64))
+
+
+@njit(cache=True, error_model="numpy")
+def _line_ss(x: np.ndarray, G: np.ndarray, lo: int, hi: int) -> tuple[float, float]:
+    """Slope and residual sum of squares of a straight line through samples lo..hi."""
+    xs = x[lo : hi + 1]
+    gs = G[lo : hi + 1]
+    xm = np.mean(xs)
+    gm = np.mean(gs)
+    sxx = np.sum((xs - xm) ** 2)
+    if not sxx > 0:
+        return np.nan, 0.0
+    b = np.sum((xs - xm) * (gs - gm)) / sxx
+    return b, np.sum((gs - gm - b * (xs - xm)) ** 2)
+
+
+@njit(cache=True, error_model="numpy")
+def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
+    """Slips of a line with a few samples per cycle, from its Schmitt-trigger falls.
+
+    With fewer than ``COARSE_CYCLE`` samples per cycle, every second difference touches
+    a slip or the stick's bend, so no differencing measures the noise, and a slip
+    split over two pixels makes two steps that need not stand out alone. Here each fall
+    of the Schmitt trigger holds one slip: the run of falling steps around its steepest
+    step. The noise is what straight lines through the sticks between them leave.
+    The slips are accepted only if they look like slips: each drop at least
+    ``COARSE_DROP_SIGMAS`` times that noise and ``RISE_FACTOR`` times the typical stick
+    step (a slip split over pixels drops that much over its run), runs shorter than the
+    sticks, sticks that rise, and a fall steeper (``COARSE_ASYMMETRY``) than the sticks'
+    steepest rise (a sine or a square wave rises as steeply as it falls). Else no
+    events (noise, a reversed sawtooth, a random walk, a sine).
+
+    Returns
+    -------
+    events : ndarray (n_events, 4)
+        As :func:`detect_slips` at window 1 (``depth``: the drop over the run).
+    sigma : float
+        Noise per sample from the stick fits (NaN where there are no events).
+    """
+    n = G.size
+    falls = np.empty((n, 2), dtype=np.int64)
+    k = _schmitt_falls(x, G, falls)
+    ev = np.empty((k, 4))
+    none = np.empty((0, 4))
+    if k < 3:
+        return none, np.nan
+    d = G[1:] - G[:-1]
+    for j in range(k):
+        a, b = falls[j, 0], falls[j, 1]
+        c = a
+        for i in range(a, b):
+            if d[i] < d[c]:
+                c = i
+        first, last = c, c
+        while first > a and d[first - 1] < 0:
+            first -= 1
+        while last < b - 1 and d[last + 1] < 0:
+            last += 1
+        ev[j, 0] = first
+        ev[j, 1] = last
+        ev[j, 2] = c
+        ev[j, 3] = G[first] - G[last + 1]
+    # sticks between the runs: from each slip's bottom to the next one's top
+    ss = 0.0
+    dof = 0
+    slopes = np.empty(k - 1)
+    stick_len = np.empty(k - 1)
+    jump = np.empty(k - 1)
+    steps = np.empty(n)
+    ns = 0
+    for j in range(k - 1):
+        lo, hi = int(ev[j, 1]) + 1, int(ev[j + 1, 0])
+        stick_len[j] = hi - lo + 1
+        jump[j] = np.max(d[lo:hi]) if hi > lo else 0.0
+        slopes[j] = np.nan
+        if hi - lo + 1 >= 3:
+            slopes[j], r = _line_ss(x, G, lo, hi)
+            ss += r
+            dof += hi - lo - 1
+        for i in range(lo, hi):
+            steps[ns] = abs(d[i])
+            ns += 1
+    if dof < 6 or ns == 0:
+        return none, np.nan
+    sigma = np.sqrt(ss / dof)
+    run = ev[:, 1] - ev[:, 0] + 1
+    good = slopes[~np.isnan(slopes)]
+    drop = np.median(ev[:, 3])
+    steep = np.empty(k)
+    for j in range(k):
+        steep[j] = -d[int(ev[j, 2])]
+    if (drop >= COARSE_DROP_SIGMAS * sigma
+            and drop >= RISE_FACTOR * np.median(steps[:ns])
+            and np.median(run) < np.median(stick_len)
+            and np.median(steep) >= COARSE_ASYMMETRY * np.median(jump)
+            and good.size >= 2 and np.median(good) > 0):  # fmt: skip
+        return ev, sigma
+    return none, np.nan
 
 
 @njit(cache=True, error_model="numpy")
@@ -343,9 +457,17 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
             if deep[j]:
                 best = j
                 break
+    k = _scale_events(G, C, ws[best], sigma, w_noise, buf) if best >= 0 else 0
+    if cyc < COARSE_CYCLE and 2 * k < nc:
+        # a few samples per cycle and most cycles without a slip: the noise estimate
+        # read the sticks' bends as noise, or slips split over pixels hid below it
+        # undespiked: a slip averaged into one pixel leaves the top's neighbours close,
+        # so at a few samples per slip the despiker cuts tops as spikes
+        ce, sc = _coarse_events(x, F)
+        if ce.shape[0] > 0:
+            return ce, 1, sc, span
     if best < 0:
         return np.empty((0, 4)), 1, sigma, span
-    k = _scale_events(G, C, ws[best], sigma, w_noise, buf)
     return buf[:k].copy(), int(ws[best]), sigma, span
 
 
