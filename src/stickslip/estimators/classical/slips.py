@@ -284,20 +284,6 @@ def _cycles(x: np.ndarray, G: np.ndarray) -> int:
 
 
 @njit(cache=True, error_model="numpy")
-def _line_ss(x: np.ndarray, G: np.ndarray, lo: int, hi: int) -> tuple[float, float]:
-    """Slope and residual sum of squares of a straight line through samples lo..hi."""
-    xs = x[lo : hi + 1]
-    gs = G[lo : hi + 1]
-    xm = np.mean(xs)
-    gm = np.mean(gs)
-    sxx = np.sum((xs - xm) ** 2)
-    if not sxx > 0:
-        return np.nan, 0.0
-    b = np.sum((xs - xm) * (gs - gm)) / sxx
-    return b, np.sum((gs - gm - b * (xs - xm)) ** 2)
-
-
-@njit(cache=True, error_model="numpy")
 def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
     """Slips of a line with a few samples per cycle, from its Schmitt-trigger falls.
 
@@ -323,10 +309,10 @@ def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
     n = G.size
     falls = np.empty((n, 2), dtype=np.int64)
     k = _schmitt_falls(x, G, falls)
-    ev = np.empty((k, 4))
     none = np.empty((0, 4))
     if k < 3:
         return none, np.nan
+    ev = np.empty((k, 4))
     d = G[1:] - G[:-1]
     for j in range(k):
         a, b = falls[j, 0], falls[j, 1]
@@ -357,8 +343,9 @@ def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
         jump[j] = np.max(d[lo:hi]) if hi > lo else 0.0
         slopes[j] = np.nan
         if hi - lo + 1 >= 3:
-            slopes[j], r = _line_ss(x, G, lo, hi)
-            ss += r
+            c0, c1, _ = _polyfit(x, G, lo, hi, x[lo], 1, np.ones(hi - lo + 1, np.bool_))
+            slopes[j] = c1
+            ss += np.sum((G[lo : hi + 1] - c0 - c1 * (x[lo : hi + 1] - x[lo])) ** 2)
             dof += hi - lo - 1
         for i in range(lo, hi):
             steps[ns] = abs(d[i])
@@ -460,9 +447,9 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     k = _scale_events(G, C, ws[best], sigma, w_noise, buf) if best >= 0 else 0
     if cyc < COARSE_CYCLE and 2 * k < nc:
         # a few samples per cycle and most cycles without a slip: the noise estimate
-        # read the sticks' bends as noise, or slips split over pixels hid below it
-        # undespiked: a slip averaged into one pixel leaves the top's neighbours close,
-        # so at a few samples per slip the despiker cuts tops as spikes
+        # read the sticks' bends as noise, or slips split over pixels hid below it.
+        # The raw force: a slip averaged into one pixel leaves the top's neighbours
+        # close, so at a few samples per slip the despiker cuts the tops as spikes.
         ce, sc = _coarse_events(x, F)
         if ce.shape[0] > 0:
             return ce, 1, sc, span
