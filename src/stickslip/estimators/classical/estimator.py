@@ -31,13 +31,22 @@ from numba import njit, prange
 import stickslip.estimators.classical.slips as sl
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
-from stickslip.estimators.classical.pt_inversion import invert
+from stickslip.estimators.classical.pt_inversion import invert, k_from_segment
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
 PAPER_DAMPING_PER_S = 1e7
 MIN_SLIPS = 3
 NOISE_TO_DROP_MAX = 0.25  # noise per sample / median drop above which a trace is too noisy
+# Precursor softening (a stick that bends from its bottom up) lowers the straight-line
+# slopes; the sticks' tangents at their start do not see it. A line takes K from the
+# tangents where they give a clearly stiffer K than the lines (softening: by
+# TANGENT_GAIN, beyond TANGENT_SIGMAS standard errors of the tangents) and its eta is
+# high enough that the PT branch is nearly straight at its start; at low eta the branch
+# bends from the start, which a quadratic's tangent does not follow (K then 14 % high).
+TANGENT_MIN_ETA = 3.0
+TANGENT_GAIN = 1.05
+TANGENT_SIGMAS = 3.0
 
 # output fields of the kernel
 (F_MEAN, F_MEAN_STD, U0, U0_STD, K_, K_STD, ETA, ETA_STD, K_EXP, K_EXP_STD, F_PEAK,
@@ -116,6 +125,29 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
         out[STATUS] = 4
         return
     eta = 2.0 * np.pi * Fmax / (a * K)
+    kt = segs[:, sl.SEG_TAN_SLOPE]
+    tok = kt > 0
+    nt = tok.sum()
+    if eta >= TANGENT_MIN_ETA and nt >= 2:
+        # the median in slope space: K = 1/(1/k - c) is skewed, so a median of noisy
+        # per-stick K's reads high even without softening
+        kt_med = np.median(kt[tok])
+        Ft_med = np.median(segs[tok, sl.SEG_TAN_F])
+        one = np.empty(1)
+        Fmax_t, K_t = invert(F_peak, F_after, np.array([kt_med]), np.array([Ft_med]),
+                             np.array([Ft_med]), a, T, v, mass_kg, gamma, one)  # fmt: skip
+        # switch only if K stays clearly stiffer at the tangents' median minus
+        # TANGENT_SIGMAS standard errors (an end tangent is noisier than a line)
+        se = 1.25 * _spread(kt[tok]) / np.sqrt(nt)
+        K_lo = k_from_segment(kt_med - TANGENT_SIGMAS * se, Ft_med, Ft_med, Fmax_t, a)
+        if K_lo > TANGENT_GAIN * K and not np.isnan(K_t):
+            Fmax, K = Fmax_t, K_t
+            Kseg = np.empty(nt)
+            Ft = segs[tok, sl.SEG_TAN_F]
+            kv_t = kt[tok]
+            for j in range(nt):
+                Kseg[j] = k_from_segment(kv_t[j], Ft[j], Ft[j], Fmax, a)
+            eta = 2.0 * np.pi * Fmax / (a * K)
     if eta < 1.0:  # no PT stick-slip has this peak and slope: the drops are not slips
         out[STATUS] = 2
         return

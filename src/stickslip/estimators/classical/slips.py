@@ -47,7 +47,8 @@ COARSE_ASYMMETRY = 1.4  # ... and the steepest fall beats the stick's steepest r
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
 SEG_C0, SEG_C1, SEG_C2, SEG_XREF, SEG_PEAK = 6, 7, 8, 9, 10
-N_SEG_COLS = 11
+SEG_TAN_SLOPE, SEG_TAN_F = 11, 12  # the quadratic's tangent at the stick's start
+N_SEG_COLS = 13
 # columns of the per-slip table
 SLIP_X, SLIP_F, SLIP_F_AFTER, SLIP_PEAK, SLIP_CENTRE = 0, 1, 2, 3, 4
 N_SLIP_COLS = 5
@@ -519,7 +520,10 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
 
     The slope is fitted on the rising part without its last ``trim`` samples: before a
     slip the branch bends over (vertical tangent at the T = 0 instability), which a
-    straight line does not follow.
+    straight line does not follow. The row also holds the segment quadratic's tangent
+    at the stick's start and the force there: precursor softening bends a stick from
+    its bottom up but leaves its slope at the bottom (PHYSICS.md's K is the stiffness
+    before softening), which no straight line over the stick sees.
     """
     row[:] = np.nan
     row[SEG_START] = lo
@@ -546,6 +550,10 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
     row[SEG_SLOPE] = b1
     row[SEG_F_LO] = b0 + b1 * (x[lo] - xref)
     row[SEG_F_HI] = b0 + b1 * (x[hi_r] - xref)
+    if m >= MIN_QUAD_SAMPLES and c2 < 0:
+        u = x[lo] - xref
+        row[SEG_TAN_SLOPE] = c1 + 2.0 * c2 * u
+        row[SEG_TAN_F] = c0 + c1 * u + c2 * u * u
 
 
 @njit(cache=True, error_model="numpy")
@@ -668,7 +676,7 @@ class SlipAnalysis:
 
     Attributes
     ----------
-    segments : ndarray (n_slips + 1, 11)
+    segments : ndarray (n_slips + 1, 13)
         Stick-segment table (see the ``SEG_*`` column constants of this module).
     slips : ndarray (n_slips, 5)
         Slip table (see the ``SLIP_*`` column constants).
