@@ -246,21 +246,16 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
 
 
 @njit(cache=True, error_model="numpy")
-def _schmitt_falls(x: np.ndarray, G: np.ndarray, out: np.ndarray) -> int:
-    """Falls of the linearly detrended force from above its 75th to below its 25th
-    percentile (a Schmitt trigger, blind to noise smaller than half the force range).
+def _schmitt_on(r: np.ndarray, out: np.ndarray) -> int:
+    """Falls of ``r`` from above its 75th to below its 25th percentile (a Schmitt
+    trigger, blind to noise smaller than half the range of ``r``).
 
     Rows of ``out``: the last sample at or above the 75th percentile before the fall and
     the first at or below the 25th. Returns the number of falls.
     """
-    n = G.size
+    n = r.size
     if n < 4:
         return 0
-    xm = np.mean(x)
-    Gm = np.mean(G)
-    sxx = np.sum((x - xm) ** 2)
-    b = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
-    r = G - b * (x - xm)
     lo = np.percentile(r, 25.0)
     hi = np.percentile(r, 75.0)
     high = r[0] >= hi
@@ -279,13 +274,43 @@ def _schmitt_falls(x: np.ndarray, G: np.ndarray, out: np.ndarray) -> int:
 
 
 @njit(cache=True, error_model="numpy")
+def _schmitt_falls(x: np.ndarray, G: np.ndarray, out: np.ndarray) -> int:
+    """Falls of the linearly detrended force through its quartiles (:func:`_schmitt_on`)."""
+    if G.size < 4:
+        return 0
+    xm = np.mean(x)
+    Gm = np.mean(G)
+    sxx = np.sum((x - xm) ** 2)
+    b = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
+    return _schmitt_on(G - b * (x - xm), out)
+
+
+@njit(cache=True, error_model="numpy")
+def _local_falls(G: np.ndarray, out: np.ndarray) -> int:
+    """Falls of the force minus its running mean over ``2 COARSE_CYCLE + 1`` samples
+    through its quartiles: on a line of a few samples per cycle that mean holds two
+    cycles or more, so it follows a drift that a straight line does not (a drift
+    larger than the sawtooth hides most cycles from :func:`_schmitt_falls`)."""
+    n = G.size
+    h = COARSE_CYCLE
+    C = _cumsum0(G)
+    r = np.empty(n)
+    for i in range(n):
+        a = max(0, i - h)
+        b = min(n, i + h + 1)
+        r[i] = G[i] - (C[b] - C[a]) / (b - a)
+    return _schmitt_on(r, out)
+
+
+@njit(cache=True, error_model="numpy")
 def _cycles(x: np.ndarray, G: np.ndarray) -> int:
     """Stick-slip cycles of a trace: the Schmitt trigger's falls (:func:`_schmitt_falls`)."""
     return _schmitt_falls(x, G, np.empty((G.size, 2), dtype=np.int64))
 
 
 @njit(cache=True, error_model="numpy")
-def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
+def _coarse_events(x: np.ndarray, G: np.ndarray, local: bool = False
+                   ) -> tuple[np.ndarray, float]:  # fmt: skip
     """Slips of a line with a few samples per cycle, from its Schmitt-trigger falls.
 
     With fewer than ``COARSE_CYCLE`` samples per cycle, every second difference touches
@@ -298,7 +323,9 @@ def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
     step (a slip split over pixels drops that much over its run), runs shorter than the
     sticks, sticks that rise, and a fall steeper (``COARSE_ASYMMETRY``) than the sticks'
     steepest rise (a sine or a square wave rises as steeply as it falls). Else no
-    events (noise, a reversed sawtooth, a random walk, a sine).
+    events (noise, a reversed sawtooth, a random walk, a sine). ``local``: the falls
+    come from :func:`_local_falls` (a drift the straight detrend does not follow), and
+    the line must hold fewer than ``COARSE_CYCLE`` samples per fall.
 
     Returns
     -------
@@ -309,9 +336,9 @@ def _coarse_events(x: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, float]:
     """
     n = G.size
     falls = np.empty((n, 2), dtype=np.int64)
-    k = _schmitt_falls(x, G, falls)
+    k = _local_falls(G, falls) if local else _schmitt_falls(x, G, falls)
     none = np.empty((0, 4))
-    if k < 3:
+    if k < 3 or (local and n >= COARSE_CYCLE * k):
         return none, np.nan
     ev = np.empty((k, 4))
     d = G[1:] - G[:-1]
@@ -452,6 +479,12 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
         # The raw force: a slip averaged into one pixel leaves the top's neighbours
         # close, so at a few samples per slip the despiker cuts the tops as spikes.
         ce, sc = _coarse_events(x, F)
+        if ce.shape[0] > 0:
+            return ce, 1, sc, span
+    if k < 3:
+        # no stick-slip found: a drift larger than the sawtooth may have hidden the
+        # cycles of a coarse line from the straight detrend
+        ce, sc = _coarse_events(x, F, True)
         if ce.shape[0] > 0:
             return ce, 1, sc, span
     if best < 0:
