@@ -63,20 +63,22 @@ def test_clean_lines_are_answered_accurately(pool: Dataset) -> None:
 def test_lab_like_lines_are_answered(pool: Dataset) -> None:
     lines = draw_family_lines(pool, fx.NuisancePrior(), DRAW_SEED).data
     answered, k_rel, u_rel = run(lines)
-    # benchmark (seed 601/6101, 384 lines): answered 0.823, K relative RMSE 19 %; this
-    # set of about 100 lines (seeds 9091/9191) is smaller: thresholds below by its spread
-    assert answered.mean() >= 0.72
-    assert np.sqrt(np.mean(k_rel**2)) <= 0.35
-    assert np.median(np.abs(k_rel)) <= 0.15
+    # benchmark (seed 601/6101, 384 lines): answered 0.901, K relative RMSE 21 %. This
+    # set (115 lines, seeds 9091/9191) gave answered 0.878, K RMSE 17.5 %, median |K
+    # error| 8.8 %; the thresholds sit below by about 2.5 binomial spreads (0.03)
+    assert answered.mean() >= 0.80
+    assert np.sqrt(np.mean(k_rel**2)) <= 0.25
+    assert np.median(np.abs(k_rel)) <= 0.13
 
 
 @pytest.mark.slow
 def test_detector_low_pass_does_not_hide_the_slips(pool: Dataset) -> None:
     # the detector's bandwidth smears each slip over a few pixels (time constant up to
-    # 3 pixels at 11 pixels per slip): before the fix 72 % answered, most "smooth sliding"
+    # 3 pixels at 11 pixels per slip): before the fix 72 % answered, most "smooth sliding";
+    # with the cycles through a running mean 0.974 (K RMSE 9.0 %)
     lines = draw_family_lines(pool, only("detector"), DRAW_SEED + 1).data
     answered, k_rel, _ = run(lines)
-    assert answered.mean() >= 0.80
+    assert answered.mean() >= 0.90
     assert np.sqrt(np.mean(k_rel**2)) <= 0.20
 
 
