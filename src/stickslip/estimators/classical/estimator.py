@@ -31,7 +31,7 @@ from numba import njit, prange
 import stickslip.estimators.classical.slips as sl
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
-from stickslip.estimators.classical.pt_inversion import invert, k_from_segment
+from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
@@ -125,28 +125,24 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
         out[STATUS] = 4
         return
     eta = 2.0 * np.pi * Fmax / (a * K)
-    kt = segs[:, sl.SEG_TAN_SLOPE]
-    tok = kt > 0
-    nt = tok.sum()
-    if eta >= TANGENT_MIN_ETA and nt >= 2:
+    tok = segs[:, sl.SEG_TAN_SLOPE] > 0
+    if eta >= TANGENT_MIN_ETA and tok.sum() >= 2:
+        kt = segs[tok, sl.SEG_TAN_SLOPE]
+        Ft = segs[tok, sl.SEG_TAN_F]
         # the median in slope space: K = 1/(1/k - c) is skewed, so a median of noisy
         # per-stick K's reads high even without softening
-        kt_med = np.median(kt[tok])
-        Ft_med = np.median(segs[tok, sl.SEG_TAN_F])
-        one = np.empty(1)
+        kt_med = np.median(kt)
+        Ft_med = np.median(Ft)
         Fmax_t, K_t = invert(F_peak, F_after, np.array([kt_med]), np.array([Ft_med]),
-                             np.array([Ft_med]), a, T, v, mass_kg, gamma, one)  # fmt: skip
+                             np.array([Ft_med]), a, T, v, mass_kg, gamma, np.empty(1))  # fmt: skip
         # switch only if K stays clearly stiffer at the tangents' median minus
         # TANGENT_SIGMAS standard errors (an end tangent is noisier than a line)
-        se = 1.25 * _spread(kt[tok]) / np.sqrt(nt)
+        se = 1.25 * _spread(kt) / np.sqrt(kt.size)
         K_lo = k_from_segment(kt_med - TANGENT_SIGMAS * se, Ft_med, Ft_med, Fmax_t, a)
         if K_lo > TANGENT_GAIN * K and not np.isnan(K_t):
             Fmax, K = Fmax_t, K_t
-            Kseg = np.empty(nt)
-            Ft = segs[tok, sl.SEG_TAN_F]
-            kv_t = kt[tok]
-            for j in range(nt):
-                Kseg[j] = k_from_segment(kv_t[j], Ft[j], Ft[j], Fmax, a)
+            Kseg = np.empty(kt.size)  # each stick's K at the tangents' F_max, for K_STD
+            median_k(kt, Ft, Ft, Fmax, a, Kseg)
             eta = 2.0 * np.pi * Fmax / (a * K)
     if eta < 1.0:  # no PT stick-slip has this peak and slope: the drops are not slips
         out[STATUS] = 2

@@ -153,8 +153,9 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
 
 
 @njit(cache=True, error_model="numpy")
-def _median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float,
-              a: float, out: np.ndarray) -> float:  # fmt: skip
+def median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float,
+             a: float, out: np.ndarray) -> float:  # fmt: skip
+    """Median over segments of :func:`k_from_segment`; ``out`` receives each segment's K."""
     for i in range(k_seg.size):
         out[i] = k_from_segment(k_seg[i], F_lo[i], F_hi[i], Fmax, a)
     vals = out[~np.isnan(out)]
@@ -173,7 +174,7 @@ def invert(F_peak: float, F_after: float, k_seg: np.ndarray, F_lo: np.ndarray,
     Fmax = F_peak
     K = np.nan
     for _ in range(MAX_ITER):
-        K = _median_k(k_seg, F_lo, F_hi, Fmax, a, K_out)
+        K = median_k(k_seg, F_lo, F_hi, Fmax, a, K_out)
         if np.isnan(K) or T <= 0:
             break
         th_lo = np.arcsin(min(max(F_after / Fmax, -1.0), 1.0))
@@ -182,7 +183,7 @@ def invert(F_peak: float, F_after: float, k_seg: np.ndarray, F_lo: np.ndarray,
         Fmax *= ratio
         if abs(ratio - 1.0) < 1e-4:
             break
-    K = _median_k(k_seg, F_lo, F_hi, Fmax, a, K_out)
+    K = median_k(k_seg, F_lo, F_hi, Fmax, a, K_out)
     return Fmax, K
 
 
