@@ -1,4 +1,5 @@
-"""The offset term of the single-line <F> interval: exact coverage of e + o."""
+"""The offset and compression terms of the single-line <F> interval: exact coverage of
+e + o (+ d)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,14 @@ import numpy as np
 import pytest
 
 from stickslip.estimators.calibration import gaussian_z
-from stickslip.estimators.offsets import OffsetPrior, coverage, offset_half_width
+from stickslip.estimators.offsets import (
+    CompressionPrior,
+    OffsetPrior,
+    compression_moment,
+    coverage,
+    friction_bounds,
+    offset_half_width,
+)
 from stickslip.simulators import effects as fx
 
 
@@ -49,3 +57,56 @@ def test_the_default_prior_is_the_crosstalk_familys_documented_range():
     assert (prior.p, prior.mean_nN) == (c.p, tuple(c.mean_nN))
     assert OffsetPrior.from_dict(prior.to_dict()) == prior
     assert OffsetPrior.from_family(fx.NuisancePrior().without("crosstalk").crosstalk).p == 0.0
+
+
+# ------------------------------------------------------------------ compression term
+def sample_compression(prior: CompressionPrior, m3: float, n: int, rng: np.random.Generator):
+    """Draws of d = c m3 by brute force."""
+    has = rng.random(n) < prior.p
+    return rng.uniform(*prior.compression, n) * m3 * has
+
+
+@pytest.mark.parametrize("level", [0.68, 0.95])
+@pytest.mark.parametrize(("h", "m3"), [(0.05, 2.0), (0.4, 1.0), (1e-4, 3.0), (0.3, -2.0),
+                                       (0.2, 1e-7), (2.0, 0.5)])  # fmt: skip
+def test_the_compression_term_gives_an_equal_tailed_interval_of_error_offset_and_loss(h, m3,
+                                                                                      level):
+    off, comp = OffsetPrior(), CompressionPrior()
+    lo, hi = friction_bounds(np.array([h]), level, off, comp, np.array([m3]))
+    rng = np.random.default_rng(11)
+    n = 400_000
+    x = sample(off, h / gaussian_z(level), n, rng) + sample_compression(comp, m3, n, rng)
+    tail = (1.0 - level) / 2
+    assert np.mean(x < lo[0]) == pytest.approx(tail, abs=0.003)
+    assert np.mean(x > hi[0]) == pytest.approx(tail, abs=0.003)
+    # a loss of the mean (m3 > 0) moves the interval up: the truth is above the estimate
+    if abs(m3) > 0.1:
+        assert np.sign(hi[0] + lo[0]) == np.sign(m3)
+
+
+def test_without_a_compression_term_the_bounds_are_the_offset_interval():
+    h = np.array([0.01, 0.2, 1.0])
+    t = offset_half_width(h, 0.95, OffsetPrior())
+    for comp in (None, CompressionPrior(p=0.0)):
+        lo, hi = friction_bounds(h, 0.95, OffsetPrior(), comp, np.ones(3))
+        np.testing.assert_allclose(hi, t)
+        np.testing.assert_allclose(lo, -t)
+    # and with no offsets either, the model's own interval
+    lo, hi = friction_bounds(h, 0.95, None, CompressionPrior(), np.zeros(3))
+    np.testing.assert_allclose(hi, h, rtol=1e-6)
+
+
+def test_the_compression_moment_is_the_mean_loss_of_a_cubic_compression():
+    f = np.linspace(-0.5, 2.0, 301) + 0.3 * np.sin(np.arange(301))
+    M, c = np.abs(f).max(), 0.12
+    out = f - c * M * (f / M) ** 3
+    assert f.mean() - out.mean() == pytest.approx(c * compression_moment(f), rel=1e-12)
+    assert compression_moment(np.zeros(5)) == 0.0
+
+
+def test_the_default_compression_prior_is_the_saturation_familys_documented_range():
+    s = fx.Saturation()
+    prior = CompressionPrior.from_family(s)
+    assert (prior.p, prior.compression) == (s.p, tuple(s.compression))
+    assert CompressionPrior.from_dict(prior.to_dict()) == prior
+    assert CompressionPrior.from_family(fx.NuisancePrior().without("saturation").saturation).p == 0

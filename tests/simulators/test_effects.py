@@ -275,9 +275,16 @@ def test_cantilever_resonance_follows_the_series_split(impl):
 
 @pytest.mark.parametrize("impl", E.IMPLEMENTATIONS)
 def test_saturation_compresses_the_top_by_the_drawn_amount(impl):
-    d, F, out, _, _ = run(only("saturation"), 100, impl, seed=19)
+    d, F, out, _, rec = run(only("saturation"), 100, impl, seed=19)
     c = d.params["saturation"]["compression"]
     np.testing.assert_allclose(out.max(axis=1), (1 - c) * F.max(axis=1), rtol=1e-6)
+    np.testing.assert_allclose(rec["saturation"], out - F, atol=1e-12)  # what it took off
+    # the loss of the mean is c m3 (m3 = mean(F^3) / max F^2) to leading order, which
+    # sizes the <F> interval's compression term (estimators.offsets)
+    m3 = (F**3).mean(axis=1) / (F**2).max(axis=1)
+    loss = -rec["saturation"].mean(axis=1)
+    k = c > 0.02
+    assert np.median(loss[k] / (c[k] * m3[k])) == pytest.approx(1.0, abs=0.35)
     order_in, order_out = np.argsort(F, axis=1), np.argsort(out, axis=1)
     np.testing.assert_array_equal(np.take_along_axis(F, order_in, 1) <= 0,
                                   np.take_along_axis(out, order_out, 1) <= 0)  # fmt: skip

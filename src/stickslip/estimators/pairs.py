@@ -52,8 +52,8 @@ PAIR_COLUMNS = (PAIR, f"{PAIR}_std", *(f"{PAIR}_{b}" for b in BOUNDS), OFFSET, "
 #: Rows of traces in volts (no calibration) carry their friction as ``F_mean_V``: their
 #: pair's columns are ``friction_pair_V ...``, ``offset_pair_V``.
 UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
-#: the std of a row's <F> error without the offset term (line model with an offset
-#: prior, :mod:`stickslip.estimators.offsets`)
+#: the std of a row's <F> error without the offset and compression terms (line model
+#: with those priors, :mod:`stickslip.estimators.offsets`)
 MODEL_STD = "F_model_std_nN"
 
 
@@ -103,7 +103,9 @@ def pair_friction(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
     out = {pair: 0.5 * (ft + fr), offset: 0.5 * (ft - fr)}
     mt, mr = _value(trace_row, MODEL_STD), _value(retrace_row, MODEL_STD)
     if unit == "nN" and np.isfinite(mt) and np.isfinite(mr):
-        # the rows' <F> intervals carry the offset prior; the pair cancels the offset
+        # the rows' <F> intervals carry the offset prior; the pair cancels the offset.
+        # A compression does not cancel, but the members read friction through it, and
+        # the pair's model interval is measured to hold (benchmarks/families.py)
         sd = 0.5 * (mt + mr)
         out[f"{pair}_std"] = sd
         for b, z in zip(BOUNDS, (-Z68, Z68, -Z95, Z95), strict=True):

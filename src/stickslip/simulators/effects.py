@@ -1149,7 +1149,8 @@ def apply(
     crosstalk_nN : (n, P) crosstalk term to use (e.g. the same for a trace and its
         retrace, from :func:`crosstalk_term`); drawn from ``rng`` when None.
     record : if a dict, receives each additive family's term (keys of :data:`ADDITIVE`,
-        ``"detector"`` being its noise and drift) and the ``"gain"`` factor, (n, P) each.
+        ``"detector"`` being its noise and drift), the ``"gain"`` factor and what the
+        ``"saturation"`` changed (output minus input), (n, P) each.
 
     Returns
     -------
@@ -1167,7 +1168,8 @@ def apply(
     streams = _streams(rng)
     prm = draw.params
     if record is not None:
-        record.update({name: np.zeros((n, P)) for name in ADDITIVE}, gain=np.ones((n, P)))
+        record.update({name: np.zeros((n, P)) for name in ADDITIVE}, gain=np.ones((n, P)),
+                      saturation=np.zeros((n, P)))  # fmt: skip
 
     def rows(f: str) -> np.ndarray:
         return np.flatnonzero(draw.mask(f))
@@ -1185,7 +1187,10 @@ def apply(
         if record is not None:
             record["crosstalk"][sel] = term
     if (sel := rows("saturation")).size:
+        before = F[sel].copy() if record is not None else None
         _saturation(F, sel, prm["saturation"], impl)
+        if record is not None:
+            record["saturation"][sel] = F[sel] - before
     if (sel := rows("gain")).size:
         g = _gain(F, sel, prm["gain"], impl, streams["gain"])
         if record is not None:

@@ -33,7 +33,7 @@ from stickslip.estimators.line.training import (
     training_effects,
     validation_set,
 )
-from stickslip.estimators.offsets import OffsetPrior
+from stickslip.estimators.offsets import CompressionPrior, OffsetPrior
 from stickslip.estimators.window.modelfile import ModelFileError, load_model
 from stickslip.simulators import PhysicalSettings, simulate
 from stickslip.simulators.instrument import LAB, EffectsMixture
@@ -114,6 +114,16 @@ def test_line_model_file_round_trip_and_damage(tmp_path):
     assert np.all(wide > narrow)
     np.testing.assert_allclose(with_off.F_model_std, without.std["F_mean_nN"])
     np.testing.assert_allclose(with_off.hi95["K_N_m"], without.hi95["K_N_m"])
+    # the compression term round-trips and moves a positive line's <F> interval up
+    ens.compression = CompressionPrior(p=0.3, compression=(0.0, 0.2))
+    assert load_line_model(save_line_model(ens, tmp_path / "c.pt", (16, 32, 48, 64), {}, {},
+                                           {})).compression == ens.compression  # fmt: skip
+    comp = predict_lines(ens, lines, np.full(1, 0.246), np.full(1, 60.0), np.full(1, 1.5),
+                         trace_m3_nN=np.full(1, 2.0))  # fmt: skip
+    up = comp.hi95["F_mean_nN"] - comp.values["F_mean_nN"]
+    down = comp.values["F_mean_nN"] - comp.lo95["F_mean_nN"]
+    assert up > down and up > narrow / 2
+    np.testing.assert_allclose(comp.F_model_std, without.std["F_mean_nN"])
     bad = tmp_path / "bad.pt"
     bad.write_bytes(path.read_bytes()[:500])
     with pytest.raises(ModelFileError, match="bad.pt"):

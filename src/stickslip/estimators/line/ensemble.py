@@ -47,7 +47,12 @@ from torch import nn
 from stickslip.conditions import GRAPHITE, Reference
 from stickslip.estimators.calibration import SHAPE_LEVELS, Z68, SpreadClasses, gaussian_z
 from stickslip.estimators.mapping import to_reference
-from stickslip.estimators.offsets import OffsetPrior, offset_half_width
+from stickslip.estimators.offsets import (
+    CompressionPrior,
+    OffsetPrior,
+    compression_moment,
+    friction_bounds,
+)
 from stickslip.estimators.window.inference import predict_windows
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.units import eta_from
@@ -289,6 +294,10 @@ class LineEnsemble:
     #: offsets one line cannot tell from friction, added to the single-line <F>
     #: interval (:mod:`stickslip.estimators.offsets`); None: no such term
     offset: OffsetPrior | None = None
+    #: compressions of large signals (saturation) one line cannot tell from a softer
+    #: contact, added to the single-line <F> interval (:class:`~stickslip.estimators.
+    #: offsets.CompressionPrior`); None: no such term
+    compression: CompressionPrior | None = None
 
     def z_at(self, level: float) -> np.ndarray:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
@@ -367,8 +376,8 @@ class LinePrediction:
     hi68: dict[str, np.ndarray]
     lo95: dict[str, np.ndarray]
     hi95: dict[str, np.ndarray]
-    #: std of the model's own <F> error, without the offset term (what a trace/retrace
-    #: pair, which cancels the offset, is left with)
+    #: std of the model's own <F> error, without the offset and compression terms (what
+    #: a trace/retrace pair, which cancels the offset, is given)
     F_model_std: np.ndarray | None = None
     #: what each member's head read for each line, (members, N, D), when asked for
     features: np.ndarray | None = None
@@ -405,6 +414,7 @@ def predict_lines(
     trace_mean_nN: np.ndarray,
     batch: int = 2048,
     features: bool = False,
+    trace_m3_nN: np.ndarray | None = None,
 ) -> LinePrediction:
     """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity.
 
@@ -412,6 +422,8 @@ def predict_lines(
     the predicted friction correction is added. Lines of equal length are batched
     together; each is read whole (no crop). With ``features``, the prediction also
     carries what each member's head read (:attr:`LinePrediction.features`).
+    ``trace_m3_nN``: each trace's :func:`~stickslip.estimators.offsets.compression_moment`
+    (on its original samples), which sizes the model's compression term (None: 0).
     """
     n = len(lines)
     a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
@@ -430,11 +442,12 @@ def predict_lines(
         if name == "F_mean_nN":
             m = m + np.asarray(trace_mean_nN, float)
             out.F_model_std = e
-            h68 = offset_half_width(h68, 0.68, ens.offset)
-            h95 = offset_half_width(h95, 0.95, ens.offset)
-            out.values[name], out.std[name] = m, h68 / Z68
-            out.lo68[name], out.hi68[name] = m - h68, m + h68
-            out.lo95[name], out.hi95[name] = m - h95, m + h95
+            m3 = 0.0 if trace_m3_nN is None else np.asarray(trace_m3_nN, float)
+            lo68, hi68 = friction_bounds(h68, 0.68, ens.offset, ens.compression, m3)
+            lo95, hi95 = friction_bounds(h95, 0.95, ens.offset, ens.compression, m3)
+            out.values[name], out.std[name] = m, (hi68 - lo68) / (2.0 * Z68)
+            out.lo68[name], out.hi68[name] = m + lo68, m + hi68
+            out.lo95[name], out.hi95[name] = m + lo95, m + hi95
             continue
         m = m + shift[name]
         out.values[name] = np.exp(m)
@@ -468,4 +481,6 @@ def predict_raw_lines(
     if short:
         raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
     means = np.array([np.mean(f) for f in force_nN])
-    return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features)
+    m3 = np.array([compression_moment(f) for f in force_nN]) if ens.compression else None
+    return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features,
+                         trace_m3_nN=m3)  # fmt: skip

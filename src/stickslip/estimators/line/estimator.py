@@ -117,7 +117,8 @@ class LineEstimator(TraceEstimator):
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
             for b in BOUNDS:
                 row.update({f"{k}_{b}": float(getattr(pred, b)[k][j]) for k in TARGETS})
-            if pred.F_model_std is not None and self.ensemble.offset is not None:
+            if pred.F_model_std is not None and (self.ensemble.offset is not None
+                                                 or self.ensemble.compression is not None):
                 row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])

@@ -38,7 +38,7 @@ from stickslip.estimators.line.training import (
     line_targets,
     training_effects,
 )
-from stickslip.estimators.offsets import OffsetPrior
+from stickslip.estimators.offsets import CompressionPrior, OffsetPrior
 from stickslip.simulators import effects as fx
 from stickslip.simulators.instrument import apply_instrument
 from stickslip.traces.dataset import Dataset
@@ -60,6 +60,15 @@ class FamilyCalibration:
         not fitted). The calibration then fits the model's <F> error against the
         friction plus each line's crosstalk mean, what the line shows. None: no such
         term, and the offsets are left to the fitted calibration.
+    compression : compressions of large signals, which one line cannot tell from a
+        softer contact, added to the single-line <F> interval (:class:`~stickslip.
+        estimators.offsets.CompressionPrior`; by default the saturation family's
+        documented range, whether or not the prior holds that family: it is not
+        fitted). The <F> target stays the friction (plus the offset): the members were
+        trained to read the friction through a compression, so their error is
+        measured against it. Where the calibration's prior holds saturation the term
+        is on top of the error it saw (conservative); where it does not, the term is
+        what sizes it. None: no such term.
     training_draws : draws per trajectory of the members' own training effects
         (:func:`~stickslip.estimators.line.training.training_effects`, a fifth of the
         lines left clean, as in training) added to the calibration lines, weighing as
@@ -76,12 +85,17 @@ class FamilyCalibration:
     offset: OffsetPrior | None = dataclasses.field(
         default_factory=lambda: OffsetPrior.from_family(fx.Crosstalk())
     )
+    compression: CompressionPrior | None = dataclasses.field(
+        default_factory=lambda: CompressionPrior.from_family(fx.Saturation())
+    )
 
     def to_dict(self) -> dict:
         return {"prior": self.prior.to_dict(), "seed": self.seed, "draws": self.draws,
                 "implementation": self.implementation, "training_draws": self.training_draws,
                 "families": list(self.prior.enabled()),
-                "offset": None if self.offset is None else self.offset.to_dict()}  # fmt: skip
+                "offset": None if self.offset is None else self.offset.to_dict(),
+                "compression": (None if self.compression is None
+                                else self.compression.to_dict())}  # fmt: skip
 
 
 @dataclass
@@ -199,7 +213,7 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                                                          mild.observed_mean]))  # fmt: skip
         Y = np.concatenate([Y, Y_mild])
     power = ens.exponent is not None and not np.allclose(ens.exponent, 1.0)
-    ens.offset = settings.offset
+    ens.offset, ens.compression = settings.offset, settings.compression
     report = calibrate_and_report(ens, cs, Y, ens.classes, power)
     report["family_calibration"] = {**settings.to_dict(), "n_trajectories": clean.n,
                                     "clean_fingerprint": clean.fingerprint()}  # fmt: skip

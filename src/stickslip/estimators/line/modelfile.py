@@ -41,7 +41,7 @@ from stickslip.estimators.line.ensemble import (
     LineSpec,
     SpreadClasses,
 )
-from stickslip.estimators.offsets import OffsetPrior
+from stickslip.estimators.offsets import CompressionPrior, OffsetPrior
 from stickslip.estimators.window.modelfile import (
     ModelFileError,
     _major,
@@ -80,6 +80,8 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
         payload["spread_classes"] = _plain(ens.classes.to_dict())
     if ens.offset is not None:
         payload["offset_prior"] = _plain(ens.offset.to_dict())
+    if ens.compression is not None:
+        payload["compression_prior"] = _plain(ens.compression.to_dict())
     if ens.expert is not None:
         payload["n_expert"] = ens.members[0].n_expert
         payload["expert"] = ens.expert.to_payload()
@@ -125,6 +127,8 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             shape=payload["shape"].numpy() if "shape" in payload else None,
             offset=(OffsetPrior.from_dict(payload["offset_prior"])
                     if "offset_prior" in payload else None),  # fmt: skip
+            compression=(CompressionPrior.from_dict(payload["compression_prior"])
+                         if "compression_prior" in payload else None),  # fmt: skip
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
