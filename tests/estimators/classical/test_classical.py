@@ -118,6 +118,30 @@ def test_too_few_slips_and_too_noisy():
     assert noise.quality == "too noisy" and noise.n_slips == 0
 
 
+def _sticks(slopes, rise: float = 2.0, dx: float = 0.01, noise: float = 0.01):
+    """Sticks of the given slopes (nN/nm), each rising by ``rise`` then slipping back."""
+    xs, Fs, x0 = [], [], 0.0
+    for k in slopes:
+        x = x0 + np.arange(int(round(rise / k / dx))) * dx
+        xs.append(x)
+        Fs.append(k * (x - x0))
+        x0 = x[-1] + dx
+    F = np.concatenate(Fs)
+    return np.concatenate(xs), F + np.random.default_rng(0).normal(0, noise, F.size)
+
+
+def test_sticks_that_fit_no_one_spring_refuse_K():
+    # every stick rises to the same peak, but their slopes differ fourfold
+    est = estimate_trace(*_sticks([3.0, 12.0] * 15), lattice_nm=0.4, temperature_K=0)
+    assert est.quality == "sticks disagree" and est.n_slips == 29
+    assert np.isnan(est.K_N_m) and np.isnan(est.U0_eV)
+    # the same line with one slope, or slopes 40 % apart, is answered
+    for slopes in ([6.0] * 30, [5.0, 7.0] * 15):
+        est = estimate_trace(*_sticks(slopes), lattice_nm=0.4, temperature_K=0)
+        assert est.quality == "ok"
+        assert est.K_N_m_std <= E.MAX_K_SPREAD * est.K_N_m
+
+
 @pytest.fixture
 def macro() -> tuple[np.ndarray, np.ndarray]:
     if not MACRO.is_file():

@@ -12,7 +12,12 @@ import numpy as np
 from stickslip.conditions import Conditions
 from stickslip.estimators import domain
 from stickslip.estimators.base import TraceEstimator
-from stickslip.estimators.classical.estimator import QUALITY, STATUS, estimate_array
+from stickslip.estimators.classical.estimator import (
+    QUALITY,
+    STATUS,
+    STICKS_DISAGREE,
+    estimate_array,
+)
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
@@ -131,7 +136,8 @@ class LineEstimator(TraceEstimator):
                           rows: list[dict[str, Any] | str]) -> None:  # fmt: skip
         """Rows whose eta is below :data:`~stickslip.estimators.domain.ETA_CONFIRM` get
         the classical estimator's refusal of their line in ``stick_slip_check`` (the
-        verdict's stick-slip check); lines it answers, and other rows, get nothing."""
+        verdict's stick-slip check); lines it answers or refuses only for their K
+        (``sticks disagree``), and other rows, get nothing."""
         # read at call time: the verdict's ratio uses the same module value
         low = [i for i, r in enumerate(rows)
                if isinstance(r, dict) and r["eta"] < domain.ETA_CONFIRM]  # fmt: skip
@@ -144,5 +150,6 @@ class LineEstimator(TraceEstimator):
                                np.array([x.temperature_K for x in c]),
                                np.array([x.velocity_nm_per_s for x in c]))  # fmt: skip
         for i, status in zip(low, table[:, STATUS].astype(int), strict=True):
-            if QUALITY[status] != OK:
+            # sticks that fit no one spring refuse K, but the slips are stick-slip
+            if QUALITY[status] != OK and status != STICKS_DISAGREE:
                 rows[i]["stick_slip_check"] = QUALITY[status]  # type: ignore[index]
