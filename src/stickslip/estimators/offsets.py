@@ -262,11 +262,12 @@ def friction_bounds(half_width: np.ndarray, level: float, offset: OffsetPrior | 
     """
     h, m3, shape = _rows(half_width, m3_nN)
     terms = _terms(offset, compression)
-    if terms[0] <= 0.0 and terms[3] <= 0.0:
+    p_offset, p_compression = terms[0], terms[3]
+    if p_offset <= 0.0 and p_compression <= 0.0:
         return -h.reshape(shape), h.reshape(shape)
     s = h / gaussian_z(level)
     lo = _quantile_rows(0.5 - level / 2, s, m3, *terms, iterations)
-    if terms[3] <= 0.0:  # symmetric: the upper bound mirrors the lower
+    if p_compression <= 0.0:  # symmetric: the upper bound mirrors the lower
         return lo.reshape(shape), -lo.reshape(shape)
     hi = _quantile_rows(0.5 + level / 2, s, m3, *terms, iterations)
     return lo.reshape(shape), hi.reshape(shape)

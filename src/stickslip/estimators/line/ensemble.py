@@ -481,6 +481,7 @@ def predict_raw_lines(
     if short:
         raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
     means = np.array([np.mean(f) for f in force_nN])
-    m3 = np.array([compression_moment(f) for f in force_nN]) if ens.compression else None
+    m3 = (np.array([compression_moment(f) for f in force_nN])
+          if ens.compression is not None else None)  # fmt: skip
     return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features,
                          trace_m3_nN=m3)  # fmt: skip
