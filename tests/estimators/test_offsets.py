@@ -102,6 +102,10 @@ def test_the_compression_moment_is_the_mean_loss_of_a_cubic_compression():
     out = f - c * M * (f / M) ** 3
     assert f.mean() - out.mean() == pytest.approx(c * compression_moment(f), rel=1e-12)
     assert compression_moment(np.zeros(5)) == 0.0
+    # a stack of lines gives one moment per line
+    rows = np.stack([f, -f, np.zeros_like(f)])
+    np.testing.assert_allclose(compression_moment(rows),
+                               [compression_moment(f), -compression_moment(f), 0.0])  # fmt: skip
 
 
 def test_the_default_compression_prior_is_the_saturation_familys_documented_range():

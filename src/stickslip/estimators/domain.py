@@ -269,10 +269,10 @@ def _number(row: Mapping[str, Any], key: str) -> float:
 def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
     """One column of the rows as floats (:func:`_value`)."""
     vals = [r.get(key) for r in rows]
-    if all(type(v) is float for v in vals):  # the usual cases, without a call per row
+    kinds = set(map(type, vals))
+    # the usual cases without a call per row (numpy reads None as NaN)
+    if kinds <= {float, type(None)}:
         return np.array(vals, float)
-    if all(v is None for v in vals):
-        return np.full(len(vals), _NAN)
     return np.array([_value(v) for v in vals], float)
 
 
@@ -381,6 +381,10 @@ def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> No
 def _put(rows: Sequence[MutableMapping[str, Any]], key: str, values: np.ndarray,
          where: np.ndarray) -> None:  # fmt: skip
     vals = values.tolist()  # Python floats
+    if where.all():
+        for row, v in zip(rows, vals, strict=True):
+            row[key] = v
+        return
     for j in np.flatnonzero(where).tolist():
         rows[j][key] = vals[j]
 
@@ -399,15 +403,18 @@ def widen_rows(rows: Sequence[MutableMapping[str, Any]], factor: float = WIDEN_F
             if not has.any():
                 continue
             log = (k not in LINEAR_TARGETS) & (m > 0)
+            bounds = {}
             for b in BOUNDS:
                 v = _column(rows, f"{k}_{b}")
                 ok = has & np.isfinite(v)
                 new = np.where(log, m * (v / m) ** factor, m + factor * (v - m))
                 # a log-normal bound at or below 0 cannot be widened in log space
-                _put(rows, f"{k}_{b}", new, ok & ~(log & ~(v > 0)))
+                put = ok & ~(log & ~(v > 0))
+                _put(rows, f"{k}_{b}", new, put)
+                bounds[b] = np.where(put, new, v)  # what the row now holds
             sd = _column(rows, f"{k}_std")
             ok = has & np.isfinite(sd)
-            lo, hi = _column(rows, f"{k}_lo68"), _column(rows, f"{k}_hi68")  # widened
+            lo, hi = bounds["lo68"], bounds["hi68"]
             from68 = log & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
             e = np.log(hi / lo) / (2.0 * Z68)
             lognormal = m * np.sqrt(np.expm1(e * e) * np.exp(e * e))

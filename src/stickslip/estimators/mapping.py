@@ -30,16 +30,26 @@ def resample_mean(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float) -> np
     that integral, taking the force as constant inside each recorded pixel (exact
     wherever a new pixel edge falls on a recorded one). Pixels that would run past the
     line are dropped.
+
+    ``force_nN`` may hold many lines on the same positions, shape (..., n): each row is
+    resampled alike, at the cost of one (the interpolation weights are shared).
     """
     x = np.asarray(x_nm, dtype=float)
     f = np.asarray(force_nN, dtype=float)
     edges = np.append(x, x[-1] + (x[-1] - x[-2]))
     n_new = int(np.floor((edges[-1] - edges[0]) / pixel_nm + 1e-9))
     if n_new < 1:
-        return np.empty(0)
-    cum = np.concatenate([[0.0], np.cumsum(f * np.diff(edges))])
+        return np.empty(f.shape[:-1] + (0,))
+    zero = np.zeros(f.shape[:-1] + (1,))
+    cum = np.concatenate([zero, np.cumsum(f * np.diff(edges), axis=-1)], axis=-1)
     new_edges = edges[0] + np.arange(n_new + 1) * pixel_nm
-    return np.diff(np.interp(new_edges, edges, cum)) / pixel_nm
+    # np.interp's piecewise-linear interpolation, its weights computed once for all rows
+    j = np.clip(np.searchsorted(edges, new_edges, side="right") - 1, 0, edges.size - 2)
+    width = edges[j + 1] - edges[j]
+    w = np.divide(new_edges - edges[j], width, out=np.ones_like(width), where=width > 0)
+    w = np.clip(w, 0.0, 1.0)
+    at = cum[..., j] + w * (cum[..., j + 1] - cum[..., j])
+    return np.diff(at, axis=-1) / pixel_nm
 
 
 def resample_to_pixel(x_nm: np.ndarray, force_nN: np.ndarray, pixel_nm: float
@@ -72,7 +82,8 @@ def to_reference(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float,
 
     Positions are divided by ``s = a / a0``; a line already on the reference pixel
     (every step within 0.1 % of it) is returned as it is, any other is resampled
-    (:func:`resample_mean`).
+    (:func:`resample_mean`). ``force_nN`` may hold many lines on the same positions,
+    shape (..., n); they are mapped together.
     """
     s = float(lattice_nm) / reference.lattice_nm
     x = np.asarray(x_nm, float) / s

@@ -95,12 +95,21 @@ class CompressionPrior:
         return cls(p=float(d["p"]), compression=(float(c[0]), float(c[1])))
 
 
-def compression_moment(force_nN: np.ndarray) -> float:
+def compression_moment(force_nN: np.ndarray) -> float | np.ndarray:
     """``mean(F^3) / max(F^2)`` of one line (nN): a compression ``c`` at the line's
-    largest force lowers its mean by ``c`` times this (:class:`CompressionPrior`)."""
+    largest force lowers its mean by ``c`` times this (:class:`CompressionPrior`).
+
+    ``force_nN`` of shape (..., n) gives one value per line, shape (...); a 1-D line
+    gives a float.
+    """
     f = np.asarray(force_nN, float)
-    top = float(np.max(f * f)) if f.size else 0.0
-    return float(np.mean(f**3) / top) if top > 0.0 else 0.0
+    if f.shape[-1] == 0:
+        return 0.0 if f.ndim == 1 else np.zeros(f.shape[:-1])
+    sq = f * f
+    top = np.max(sq, axis=-1)
+    cube = np.mean(sq * f, axis=-1)
+    m3 = np.divide(cube, top, out=np.zeros_like(cube), where=top > 0.0)
+    return float(m3) if f.ndim == 1 else m3
 
 
 # ------------------------------------------------------------------ the numerics

@@ -18,6 +18,7 @@ from stickslip.estimators.line.ensemble import (
     line_inputs,
     map_line,
     predict_lines,
+    predict_raw_lines,
 )
 from stickslip.estimators.line.modelfile import load_line_model, save_line_model
 from stickslip.estimators.line.training import (
@@ -91,6 +92,43 @@ def test_predictions_carry_ordered_intervals_and_map_back():
     # same mapped input: U0 scales with s, K with 1/s (conditioning differs slightly)
     s = 0.316 / 0.246
     assert np.median(p2.values["U0_eV"] / p1.values["U0_eV"]) == pytest.approx(s, rel=0.5)
+
+
+def test_packed_inference_body_gives_the_plain_body_s_features():
+    # the oneDNN-packed body must be the same network as the folded nn.Sequential
+    torch.manual_seed(4)
+    net = LineCNN()
+    net.train()
+    net(torch.randn(64, 2, 300), torch.randn(64, 2))  # move the batch-norm statistics
+    X, C = torch.randn(40, 2, 333), torch.randn(40, 2)
+    plain, packed = net.fused(pack=False), net.fused()
+    if not torch.backends.mkldnn.is_available():
+        pytest.skip("this torch build has no oneDNN")
+    assert packed.packed is not None and plain.packed is None
+    with torch.inference_mode():
+        a, b = plain.features(X, C), packed.features(X, C)
+    torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-5)
+    # with gradients on, the copy runs its plain layers (the packed ones have none)
+    c = packed.features(X, C)
+    assert c.requires_grad
+    torch.testing.assert_close(c.detach(), a, rtol=1e-5, atol=1e-5)
+
+
+def test_raw_lines_on_shared_and_own_axes_predict_as_one_by_one():
+    # traces are grouped by axis and lattice and mapped as stacks: same answer as alone
+    ens = _untrained()
+    rng = np.random.default_rng(8)
+    x1 = np.arange(512) * 0.0215
+    x2 = np.cumsum(rng.uniform(0.015, 0.03, 450))
+    xs = [x1, x1.copy(), x2, x1, x2]
+    fs = [np.sin(x / 0.05) + rng.normal(0.0, 0.1, x.size) + 1.0 for x in xs]
+    a = np.array([0.246, 0.246, 0.246, 0.3, 0.246])
+    together = predict_raw_lines(ens, xs, fs, a, np.full(5, 60.0))
+    for i in range(5):
+        alone = predict_raw_lines(ens, [xs[i]], [fs[i]], a[i : i + 1], np.full(1, 60.0))
+        for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta"):
+            np.testing.assert_allclose(together.values[k][i], alone.values[k][0], rtol=1e-5)
+            np.testing.assert_allclose(together.hi95[k][i], alone.hi95[k][0], rtol=1e-5)
 
 
 def test_line_model_file_round_trip_and_damage(tmp_path):

@@ -97,3 +97,20 @@ def test_resample_mean_is_a_pixel_mean():
     step = resample_mean(x, np.where(x < 5.0, 0.0, 2.0), 0.05)
     assert set(np.round(step, 9)) <= {0.0, 0.8, 2.0} and step[0] == 0
     assert step[-1] == pytest.approx(2.0)
+
+
+def test_resample_mean_of_a_stack_is_that_of_each_row():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.uniform(0.015, 0.025, 400))  # a non-uniform axis (piezo creep)
+    F = rng.normal(size=(2, 3, 400))
+    out = resample_mean(x, F, 0.03)
+    assert out.shape[:2] == (2, 3)
+    for i in range(2):
+        for j in range(3):
+            one = resample_mean(x, F[i, j], 0.03)
+            np.testing.assert_allclose(out[i, j], one, rtol=0, atol=1e-12)
+            # and the one-line path is numpy's own interpolation of the running integral
+            edges = np.append(x, 2 * x[-1] - x[-2])
+            cum = np.concatenate([[0.0], np.cumsum(F[i, j] * np.diff(edges))])
+            ref = np.diff(np.interp(x[0] + np.arange(one.size + 1) * 0.03, edges, cum)) / 0.03
+            np.testing.assert_allclose(one, ref, rtol=0, atol=1e-12)
