@@ -11,8 +11,8 @@ from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "stickslip"
 # the pipeline, in order: a module may import only its own layer and earlier ones
-LAYERS = ("_version", "units", "conditions", "atomic", "traces", "simulators", "estimators",
-          "diagnostics", "jobs", "api", "cli")  # fmt: skip
+LAYERS = ("_version", "units", "robust", "conditions", "atomic", "traces", "simulators",
+          "estimators", "diagnostics", "jobs", "api", "cli")  # fmt: skip
 
 
 def _module(path: Path) -> str:

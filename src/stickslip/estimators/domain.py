@@ -85,6 +85,7 @@ from numba import njit
 
 from stickslip.estimators.calibration import Z68
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
+from stickslip.robust import mad_sigma, median, select
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
 ETA_WINDOW = (1.2, 40.0)
@@ -109,15 +110,6 @@ LINEAR_TARGETS = ("F_mean_nN", VOLT_NAMES["F_mean_nN"])  # the others are log-no
 # fields of the kernel's output
 N_DROPS, N_RISES, SPACING_MEDIAN, SPACING_Q25, NOISE, SPAN = range(6)
 N_FIELDS = 6
-
-
-@njit(cache=True, error_model="numpy")
-def _mad(v: np.ndarray) -> float:
-    med = np.median(v)
-    s = 1.4826 * np.median(np.abs(v - med))
-    if s == 0.0:  # digitised lines: more than half the values equal
-        s = 1.2533 * np.mean(np.abs(v - med))
-    return s
 
 
 @njit(cache=True, error_model="numpy")
@@ -154,7 +146,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     for i in range(1, n - 1):
         a, b, c = F[i - 1], F[i], F[i + 1]
         G[i] = max(min(a, b), min(max(a, b), c))
-    sigma = _mad(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
+    sigma = mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
     xm, Gm = np.mean(x), np.mean(G)
     sxx = np.sum((x - xm) ** 2)
     slope = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
@@ -162,10 +154,10 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     hi, lo = int(0.98 * (n - 1)), int(0.02 * (n - 1))
     span = 0.0
     if hi > lo:
-        resid = np.partition(G - slope * (x - xm), hi)
-        span = resid[hi] - np.partition(resid[:hi], lo)[lo]
+        resid = G - slope * (x - xm)
+        span = select(resid, hi) - select(resid, lo)
     d = G[1:] - G[:-1]
-    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * np.median(np.abs(d)), 1e-12)
+    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * median(np.abs(d)), 1e-12)
     min_size = max(0.25 * span, 6.0 * sigma, 1e-12)
     pos = np.empty(d.size, np.int64)
     nd = _events(d, -1.0, thr, min_size, pos)
@@ -174,7 +166,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         gaps = np.empty(nd - 1)
         for k in range(nd - 1):
             gaps[k] = x[pos[k + 1] + 1] - x[pos[k] + 1]
-        out[SPACING_MEDIAN] = np.median(gaps)
+        out[SPACING_MEDIAN] = median(gaps)
         out[SPACING_Q25] = np.percentile(gaps, 25.0)
     out[N_RISES] = _events(d, 1.0, thr, min_size, pos)
     out[NOISE] = sigma

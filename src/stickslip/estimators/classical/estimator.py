@@ -33,6 +33,7 @@ import stickslip.estimators.classical.slips as sl
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
+from stickslip.robust import mad_sigma, median
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
@@ -77,7 +78,7 @@ REGIMES = ("smooth", "single slip", "multiple slip")
 @njit(cache=True, error_model="numpy")
 def _spread(v: np.ndarray) -> float:
     vals = v[~np.isnan(v)]
-    return sl._mad_sigma(vals) if vals.size > 1 else np.nan
+    return mad_sigma(vals) if vals.size > 1 else np.nan
 
 
 @njit(cache=True, error_model="numpy")
@@ -114,20 +115,20 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
         out[STATUS] = 2 if smooth else 1
         return
     # a refusal carries no numbers: slopes between slips that noise may have made up
-    if sigma > NOISE_TO_DROP_MAX * np.median(drops[good]):
+    if sigma > NOISE_TO_DROP_MAX * median(drops[good]):
         out[STATUS] = 3
         return
-    out[K_EXP] = np.median(kseg[segok])
+    out[K_EXP] = median(kseg[segok])
     out[K_EXP_STD] = _spread(kseg[segok])
     # mean peak, outliers (missed or spurious slips) trimmed at 4 sigma
     peaks = slp[good, sl.SLIP_PEAK]
-    med = np.median(peaks)
-    sp = sl._mad_sigma(peaks)
+    med = median(peaks)
+    sp = mad_sigma(peaks)
     keep = np.abs(peaks - med) <= 4.0 * sp + 1e-12
     F_peak = np.mean(peaks[keep])
     out[F_PEAK] = F_peak
     out[F_PEAK_STD] = _spread(peaks)
-    F_after = np.median(slp[good, sl.SLIP_F_AFTER])
+    F_after = median(slp[good, sl.SLIP_F_AFTER])
     kv = kseg[segok]
     Kseg = np.empty(kv.size)
     Fmax, K = invert(F_peak, F_after, kv, segs[segok, sl.SEG_F_LO], segs[segok, sl.SEG_F_HI],
@@ -142,8 +143,8 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
         Ft = segs[tok, sl.SEG_TAN_F]
         # the median in slope space: K = 1/(1/k - c) is skewed, so a median of noisy
         # per-stick K's reads high even without softening
-        kt_med = np.median(kt)
-        Ft_med = np.median(Ft)
+        kt_med = median(kt)
+        Ft_med = median(Ft)
         Fmax_t, K_t = invert(F_peak, F_after, np.array([kt_med]), np.array([Ft_med]),
                              np.array([Ft_med]), a, T, v, mass_kg, gamma, np.empty(1))  # fmt: skip
         # switch only if K stays clearly stiffer at the tangents' median minus
@@ -177,7 +178,7 @@ def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
             dX = slp[k, sl.SLIP_X] - slp[k - 1, sl.SLIP_X]
             adv[k] = dX - (slp[k, sl.SLIP_F] - slp[k - 1, sl.SLIP_F_AFTER]) / K
     av = adv[~np.isnan(adv)]
-    d_stick = np.median(av) if av.size > 0 else 0.0
+    d_stick = median(av) if av.size > 0 else 0.0
     nmult = 0
     ngood = 0
     for k in range(ns):

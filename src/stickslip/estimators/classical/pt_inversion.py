@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from stickslip.robust import median
 from stickslip.units import EV_TO_NN_NM, KB_NN_NM_PER_K
 
 N_GRID = 160  # branch points of the thermal model
@@ -159,7 +160,7 @@ def median_k(k_seg: np.ndarray, F_lo: np.ndarray, F_hi: np.ndarray, Fmax: float,
     for i in range(k_seg.size):
         out[i] = k_from_segment(k_seg[i], F_lo[i], F_hi[i], Fmax, a)
     vals = out[~np.isnan(out)]
-    return np.median(vals) if vals.size > 0 else np.nan
+    return median(vals) if vals.size > 0 else np.nan
 
 
 @njit(cache=True, error_model="numpy")

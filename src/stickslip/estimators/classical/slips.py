@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from stickslip.robust import mad_sigma, median
+
 MIN_FIT_SAMPLES = 3  # straight line
 MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
 NOISE_SIGMAS = 5.0  # detection threshold on D_w in units of its noise
@@ -55,17 +57,6 @@ N_SLIP_COLS = 5
 
 
 @njit(cache=True, error_model="numpy")
-def _mad_sigma(v: np.ndarray) -> float:
-    if v.size == 0:
-        return 0.0
-    med = np.median(v)
-    s = 1.4826 * np.median(np.abs(v - med))
-    if s == 0.0:  # digitised signals: more than half the values equal
-        s = 1.2533 * np.mean(np.abs(v - med))
-    return s
-
-
-@njit(cache=True, error_model="numpy")
 def _clipped_sigma(d2: np.ndarray) -> float:
     """Standard deviation of white noise from its second differences ``d2`` (``6 s^2``).
 
@@ -75,7 +66,7 @@ def _clipped_sigma(d2: np.ndarray) -> float:
     """
     if d2.size == 0:
         return 0.0
-    s = _mad_sigma(d2)
+    s = mad_sigma(d2)
     keep = np.ones(d2.size, dtype=np.bool_)
     for _ in range(2):
         cut = CLIP_SIGMAS * s
@@ -87,7 +78,7 @@ def _clipped_sigma(d2: np.ndarray) -> float:
                 keep[max(i - 1, 0) : i + 2] = False
         if keep.sum() < max(8, d2.size // 4):
             break
-        s_kept = _mad_sigma(d2[keep])
+        s_kept = mad_sigma(d2[keep])
         if not s_kept > 0:  # coarse digitisation: the kept values may all be equal
             break
         s = s_kept
@@ -107,9 +98,9 @@ def noise_sigma(F: np.ndarray) -> float:
     if n < 3:
         return 0.0
     d2 = F[2:] - 2.0 * F[1:-1] + F[:-2]
-    s_all = _mad_sigma(d2) / np.sqrt(6.0)
+    s_all = mad_sigma(d2) / np.sqrt(6.0)
     d1 = F[1:] - F[:-1]
-    cut = -RISE_FACTOR * np.median(np.abs(d1))
+    cut = -RISE_FACTOR * median(np.abs(d1))
     if not cut < 0:  # coarse digitisation: most steps are zero, nothing stands out
         return s_all
     keep = np.ones(n - 2, dtype=np.bool_)
@@ -235,7 +226,7 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
     n = G.size
     D = _window_diff(G, w)
     Dv = D[w - 1 : n - w]
-    floor = RISE_FACTOR * np.median(np.abs(Dv)) if Dv.size > 0 else 0.0
+    floor = RISE_FACTOR * median(np.abs(Dv)) if Dv.size > 0 else 0.0
     noise_w = sigma * np.sqrt(2.0 / w)
     if w_noise >= 1:
         wm = min(w, w_noise)
@@ -383,15 +374,15 @@ def _coarse_events(x: np.ndarray, G: np.ndarray, local: bool = False
     sigma = np.sqrt(ss / dof)
     run = ev[:, 1] - ev[:, 0] + 1
     good = slopes[~np.isnan(slopes)]
-    drop = np.median(ev[:, 3])
+    drop = median(ev[:, 3])
     steep = np.empty(k)
     for j in range(k):
         steep[j] = -d[int(ev[j, 2])]
     if (drop >= COARSE_DROP_SIGMAS * sigma
-            and drop >= RISE_FACTOR * np.median(steps[:ns])
-            and np.median(run) < np.median(stick_len)
-            and np.median(steep) >= COARSE_ASYMMETRY * np.median(jump)
-            and good.size >= 2 and np.median(good) > 0):  # fmt: skip
+            and drop >= RISE_FACTOR * median(steps[:ns])
+            and median(run) < median(stick_len)
+            and median(steep) >= COARSE_ASYMMETRY * median(jump)
+            and good.size >= 2 and median(good) > 0):  # fmt: skip
         return ev, sigma
     return none, np.nan
 
@@ -532,7 +523,7 @@ def _robust_fit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg
     for i in range(lo, hi + 1):
         u = x[i] - xref
         res[i - lo] = F[i] - (c0 + c1 * u + c2 * u * u)
-    cut = OUTLIER_SIGMAS * max(sigma, _mad_sigma(res[mask[:m]]))
+    cut = OUTLIER_SIGMAS * max(sigma, mad_sigma(res[mask[:m]]))
     if cut <= 0:
         return c0, c1, c2
     mask2 = mask.copy()
@@ -673,7 +664,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
     events, w, sigma, _ = detect_slips(x, F)
     # the fits' tolerance (outlier cut, bend test) is the scatter of all second
     # differences, sharp corners of the branch included, not the sticks' noise alone
-    tol = _mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0) if n >= 3 else 0.0
+    tol = mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0) if n >= 3 else 0.0
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
     slips = np.full((ne, N_SLIP_COLS), np.nan)

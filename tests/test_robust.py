@@ -1,0 +1,41 @@
+"""Compiled order statistics: the same values as numpy's, on the inputs that trouble a
+selection (ties, sorted runs, digitised lines, NaN)."""
+
+import numpy as np
+import pytest
+
+from stickslip.robust import mad_sigma, median, select
+
+
+def _cases():
+    rng = np.random.default_rng(11)
+    out = [rng.normal(size=n) for n in (1, 2, 3, 4, 5, 10, 510, 511, 2000)]
+    out += [np.round(rng.normal(size=510) * 2.0) for _ in range(3)]  # digitised: many ties
+    out += [np.zeros(510), np.arange(510.0), np.arange(510.0)[::-1].copy(),
+            np.r_[np.ones(300), np.zeros(211)], np.tile([1.0, 2.0], 256)]  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize("v", _cases(), ids=lambda v: f"n{v.size}")
+def test_median_and_select_are_numpy_s(v):
+    before = v.copy()
+    assert median(v) == np.median(v)
+    for k in {0, v.size // 3, v.size // 2, v.size - 1}:
+        assert select(v, k) == np.partition(v, k)[k]
+    np.testing.assert_array_equal(v, before)  # the input is not reordered
+
+
+def test_nan_and_empty_inputs():
+    assert np.isnan(median(np.array([1.0, np.nan, 2.0])))
+    assert np.isnan(median(np.empty(0)))
+    assert mad_sigma(np.empty(0)) == 0.0
+
+
+def test_mad_sigma_is_the_gaussian_std_and_survives_digitisation():
+    rng = np.random.default_rng(5)
+    v = rng.normal(0.0, 2.0, 200_000)
+    assert mad_sigma(v) == pytest.approx(2.0, rel=0.01)
+    # more than half the values equal: the MAD is 0, the mean deviation is not
+    d = np.r_[np.zeros(600), rng.normal(0.0, 1.0, 400)]
+    assert mad_sigma(d) > 0.0
+    assert mad_sigma(d) == pytest.approx(1.2533 * np.mean(np.abs(d - np.median(d))))
