@@ -147,7 +147,7 @@ class PackedBody:
     ``nn.Conv1d`` converts every layer's input and output between torch's layout and
     oneDNN's; for these small layers that costs as much as the arithmetic. Kept blocked
     from the first layer to the last, the stack runs about twice as fast on a CPU, with
-    the same arithmetic (tests/estimators/line/test_ensemble.py compares the two).
+    the same arithmetic (tests/estimators/line/test_line.py compares the two).
     Inference only: no gradients flow through it.
     """
 
