@@ -31,13 +31,14 @@ in ``--pools``) and scored through the estimator (``LineEstimator.predict``, as
   every line (seed 6200 + index of f), scored after a calibration without f (the
   leave-one-family-out check of ``benchmarks/families.py``).
 
-The bundled model (``src/stickslip/resources/line_model.pt``, an older recipe: two
-randomised sets, a typical-substrate set and paper-preset lines, ~14k lines) is scored
-the same way as a reference point. Models (trained, and calibrated on the families:
-``*_cal.pt``) and their scores are cached in ``--work`` (a score is reused while the
-model file and the sets are unchanged, whatever the library's code: delete
-``*.scores.json`` to re-score after changing the estimator or the calibration). Prints
-the table, writes ``learning_curve.json`` and ``learning_curve.png`` in ``--work``.
+The bundled model (``src/stickslip/resources/line_model.pt``: a randomised set, a
+typical-substrate set and paper-preset lines, with the families; its training size is
+read from its file) is scored the same way as a reference point. Models (trained, and
+calibrated on the families: ``*_cal.pt``) and their scores are cached in ``--work``
+(a score is reused while the model file and the sets are unchanged, whatever the
+library's code: delete ``*.scores.json`` to re-score after changing the estimator or
+the calibration). Prints the table, writes ``learning_curve.json`` and
+``learning_curve.png`` in ``--work``.
 
 Usage: python benchmarks/learning_curve.py [--sizes 250 500 1000] [--family-sizes N ...]
        [--family-fraction 0.5] [--lofo-family-sizes N ...]
@@ -84,7 +85,6 @@ KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
 #: Pools and seeds of benchmarks/families.py (calibration, evaluation, "all", "with f").
 CAL_POOL, EVAL_POOL = (600, 501), (400, 601)
 ALL_SEED, WITH_SEED = 6101, 6200
-BUNDLED_LINES = "~14k"
 
 
 def set_metrics(estimator: LineEstimator, data: Dataset) -> dict:
@@ -200,9 +200,9 @@ HEAD = (f"{'model':24s} {'train n':>7s} {'train s':>7s}  {'set':20s} {'n':>4s}  
 
 def table_rows(r: dict) -> list[str]:
     """Printed rows of one model's scores."""
-    n = str(r["n_train"]) if r["model"] != "bundled" else BUNDLED_LINES
+    n = str(r["n_train"]) if r.get("n_train") else "-"
     secs = f"{r['train_seconds']:.0f}" if r["train_seconds"] else "-"
-    label = r["model"] if r["model"] != "bundled" else "bundled (older recipe)"
+    label = r["model"]
     rows = []
     for s, m in r["sets"].items():
         cov = "  ".join(f"{m['coverage95'][k]:.3f}" for k in KEYS)
@@ -253,7 +253,7 @@ def plot(results: list[dict], path: Path) -> None:
         ax.set_title(title)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="center right", fontsize=7,
-               title="stars: bundled model\n(older recipe)", title_fontsize=7)  # fmt: skip
+               title="stars: bundled model", title_fontsize=7)  # fmt: skip
     fig.tight_layout(rect=(0, 0, 0.8, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
