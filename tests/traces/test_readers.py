@@ -118,6 +118,17 @@ def test_npy_layouts(tmp_path):
     assert len(errors) == 1 and "shape (3, 4, 5)" in str(errors[0])
 
 
+def test_npy_with_a_python2_style_header_gives_no_warning(tmp_path, recwarn):
+    # numpy warns (and advises saving again) before it parses such a header; a user
+    # gets the file read or one clean error, never that warning
+    np.save(tmp_path / "a.npy", _ramp())
+    raw = (tmp_path / "a.npy").read_bytes()
+    (tmp_path / "b.npy").write_bytes(raw.replace(f"({N},)".encode(), f"({N}L)".encode()))
+    with pytest.raises(TraceReadError, match="damaged .npy"):
+        read_file(tmp_path / "b.npy")
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
+
+
 def test_project_hdf5(tmp_path):
     p = tmp_path / "set.h5"
     with h5py.File(p, "w") as f:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import io
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -193,7 +194,12 @@ def read_npy(path: Path, **options: Any) -> list[Trace]:
     if head != b"\x93NUMPY":
         raise TraceReadError(path, "not a NumPy .npy file (bad magic)")
     try:
-        arr = np.load(path, allow_pickle=False)
+        with warnings.catch_warnings():
+            # a header written the Python 2 way still reads; numpy's advice to save the
+            # file again is not the user's concern here
+            warnings.filterwarnings("ignore", message="Reading `.npy` or `.npz` file required",
+                                    category=UserWarning)  # fmt: skip
+            arr = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as e:
         raise TraceReadError(path, f"damaged .npy file ({e})") from None
     if arr.dtype.names:
