@@ -12,7 +12,8 @@ def _cases():
     out = [rng.normal(size=n) for n in (1, 2, 3, 4, 5, 10, 510, 511, 2000)]
     out += [np.round(rng.normal(size=510) * 2.0) for _ in range(3)]  # digitised: many ties
     out += [np.zeros(510), np.arange(510.0), np.arange(510.0)[::-1].copy(),
-            np.r_[np.ones(300), np.zeros(211)], np.tile([1.0, 2.0], 256)]  # fmt: skip
+            np.r_[np.ones(300), np.zeros(211)], np.tile([1.0, 2.0], 256),
+            np.array([np.inf, -np.inf, 1.0, 2.0, 3.0])]  # fmt: skip
     return out
 
 

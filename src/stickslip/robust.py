@@ -70,8 +70,11 @@ def select(v: np.ndarray, k: int) -> float:
 def median(v: np.ndarray) -> float:
     """``np.median(v)`` of a 1-D array (NaN for an empty array or one holding NaN)."""
     n = v.size
-    if n == 0 or np.isnan(np.sum(v)):
+    if n == 0:
         return np.nan
+    for x in v:  # not np.sum: +inf and -inf together sum to NaN
+        if np.isnan(x):
+            return np.nan
     a = v.copy()
     k = (n - 1) // 2
     m = _select_inplace(a, k)
