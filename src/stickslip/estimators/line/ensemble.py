@@ -549,16 +549,18 @@ def predict_raw_lines(
     n = len(force_nN)
     a = np.broadcast_to(np.asarray(lattice_nm, float), (n,))
     lines: list[np.ndarray] = [np.empty(0)] * n
-    means, m3 = np.empty(n), np.empty(n)
+    means = np.empty(n)
+    m3 = np.empty(n) if ens.compression is not None else None  # only its term reads it
     for idx in line_groups(x_nm, a):
         F = np.stack([np.asarray(force_nN[i], float) for i in idx])
         mapped = to_reference(x_nm[idx[0]], F, a[idx[0]], ens.spec.reference)
         for k, i in enumerate(idx):
             lines[i] = mapped[k]
         means[idx] = F.mean(axis=1)
-        m3[idx] = compression_moment(F)
+        if m3 is not None:
+            m3[idx] = compression_moment(F)
     short = [i for i, f in enumerate(lines) if f.size < ens.spec.min_pixels]
     if short:
         raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
     return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features,
-                         trace_m3_nN=m3 if ens.compression is not None else None)  # fmt: skip
+                         trace_m3_nN=m3)  # fmt: skip
