@@ -6,8 +6,8 @@ bundled recipe's distribution) of ``--set-size`` trajectories each, seeds ``--se
 trains on the first ``n`` rows of their concatenation, so the sets are nested (every
 row is an independent draw). Training uses the bundled recipe's settings
 (:class:`~stickslip.estimators.line.training.LineTrainConfig` defaults: 3 members, 45
-epochs, the detector effects' prior; 10 % of the trajectories held out for the
-validation and the first calibration) and its expert (``--expert``, the clean pi MLP,
+epochs, the detector effects' prior; 10 % of the trajectories, at most 2,000, held out
+for the validation and the first calibration) and its expert (``--expert``, the clean pi MLP,
 cached in ``--work``). Unlike the bundled model, no typical-substrate or paper-preset
 set is added: the size is that of one randomised set.
 
@@ -248,13 +248,15 @@ def plot(results: list[dict], path: Path) -> None:
                     ax.plot(r["n_train"], value(r["sets"][s]), "*", ms=11, color=colours[s])
         if isinstance(key, tuple):
             ax.axhline(0.95, color="k", lw=0.8)
+            ax.axhspan(0.90, 0.98, color="0.9", zorder=0)  # the trust issue's target band
         ax.set_xscale("log")
-        ax.set_xlabel("training trajectories (after the 10 % held out)")
+        ax.set_xlabel("training trajectories (validation share held out)")
         ax.set_title(title)
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center right", fontsize=7,
-               title="stars: bundled model", title_fontsize=7)  # fmt: skip
-    fig.tight_layout(rect=(0, 0, 0.8, 1))
+    # below the panels, so that they keep the figure's whole width
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8,
+               title="stars: bundled model", title_fontsize=8)  # fmt: skip
+    fig.tight_layout(rect=(0, 0.04 + 0.025 * -(-len(labels) // 4), 1, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
