@@ -109,22 +109,20 @@ def line_inputs(lines: list[np.ndarray], spec: LineSpec, length: int | None = No
     are padded by repeating them periodically (a stick-slip line is nearly periodic).
     """
     L = min(f.size for f in lines) if length is None else int(length)
-    X = np.empty((len(lines), 2, L), np.float32)
-    if rng is None and all(f.size == L for f in lines):
-        # all whole (inference batches lines of one length): one array operation
-        W = np.stack(lines)
-        X[:, 0] = W / spec.force_scale_nN
-        X[:, 1, 0] = 0.0
-        X[:, 1, 1:] = np.diff(W, axis=1) / spec.slope_scale_nN
-        return torch.from_numpy(X)
-    for i, f in enumerate(lines):
+
+    def window(f: np.ndarray) -> np.ndarray:
         if f.size < L:
             f = np.resize(f, L)
         start = (f.size - L) // 2 if rng is None else int(rng.integers(0, f.size - L + 1))
-        w = f[start : start + L]
-        X[i, 0] = w / spec.force_scale_nN
-        X[i, 1, 0] = 0.0
-        X[i, 1, 1:] = np.diff(w) / spec.slope_scale_nN
+        return f[start : start + L]
+
+    # inference batches lines of one length, taken whole: no call per line
+    whole = rng is None and all(f.size == L for f in lines)
+    W = np.stack(lines if whole else [window(f) for f in lines])
+    X = np.empty((len(lines), 2, L), np.float32)
+    X[:, 0] = W / spec.force_scale_nN
+    X[:, 1, 0] = 0.0
+    X[:, 1, 1:] = np.diff(W, axis=1) / spec.slope_scale_nN
     return torch.from_numpy(X)
 
 
