@@ -147,6 +147,10 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
             mid = 0.5 * (th + th_prev)
             total += (S_prev - S) * Fmax * np.sin(min(mid, 0.5 * np.pi))
             S_prev = S
+            if S == 0.0:
+                # every stick has slipped (the survival underflowed): the points left
+                # add exactly zero, so stopping here changes no bit of the result
+                return total
         rate_dt_prev = rate_dt
         th_prev = th
     # whatever survives slips at th_c > pi/2: its peak is F_max
