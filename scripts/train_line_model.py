@@ -33,7 +33,7 @@ command line leaves at their defaults.
 MODEL (trained by this script with the same arguments, the calibration's own settings
 --calibration-draws and --spread-power aside) on the same validation trajectories.
 
-Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102] [--typical 1500]
+Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103 105] [--typical 1500]
        [--typical-seed 104] [--typical-fraction 0.8] [--paper 1500] [--paper-seed 5]
        [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
        [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power] [--families 0.5]

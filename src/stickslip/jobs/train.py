@@ -68,7 +68,9 @@ class BundledRecipe:
     """The data behind the bundled line model (``--recipe bundled``)."""
 
     n: int = 4000
-    seeds: tuple[int, ...] = (102,)
+    # three randomised sets: the learning curve (docs/learning.md) gains little past about
+    # 11k trajectories; 104 is left out because the typical set uses that seed
+    seeds: tuple[int, ...] = (102, 103, 105)
     typical: int = 1500
     typical_seed: int = 104
     paper: int = 1500
