@@ -145,7 +145,8 @@ class LineEstimator(TraceEstimator):
         if not low:
             return
         # the classical kernel alone: its quality flag is all the check needs. It inverts
-        # at T = 0 (F_max at the mean peak, no thermal fixed point: a third of the cost).
+        # at T = 0 (F_max at the mean peak): the thermal fixed point took about a quarter
+        # of the check's time.
         # The thermal correction raises F_max, and with it eta, so the eta found here is
         # the lower one: it errs towards "smooth sliding". On the verdict's smooth, clean
         # and family sets of seeds 1 and 2 (1,200 lines) it set the thermal inversion's
