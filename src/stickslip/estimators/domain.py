@@ -45,13 +45,15 @@ row's estimate, so they hold for every estimator:
    model gives eta 1.15-1.45 for most of them), where it also puts weak stick-slip, so
    an estimate there cannot say which of the two the line is (the classical
    estimator inverts the slips and can report eta < 1.2, so it is held to the window);
-5. for learned estimators whose eta estimate is below :data:`ETA_CONFIRM`, the line's own slips: the
-   classical estimator (slip detection, stick fits, PT inversion at T = 0, the lower eta) must
-   answer it. A model trained with the effect families (low-pass, precursor softening) puts smooth
-   lines at eta 1.4-2 too, beyond any edge that keeps weak stick-slip in domain; the inversion tells
-   them apart (it finds no slips to fit, or a peak and slope no PT stick-slip has). The estimator
-   puts the classical refusal in the row's ``stick_slip_check`` (absent when not checked or
-   answered) -- ``"eta near the trained window's edge and the slips do not invert to stick-slip"``;
+5. for learned estimators whose eta estimate is below :data:`ETA_CONFIRM`, the line's
+   own slips: the classical estimator (slip detection, stick fits, PT inversion at T =
+   0, the lower eta) must answer it. A model trained with the effect families
+   (low-pass, precursor softening) puts smooth lines at eta 1.4-2 too, beyond any edge
+   that keeps weak stick-slip in domain; the inversion tells them apart (it finds no
+   slips to fit, or a peak and slope no PT stick-slip has). The estimator puts the
+   classical refusal in the row's ``stick_slip_check`` (absent when not checked or
+   answered) -- ``"eta near the trained window's edge and the slips do not invert to
+   stick-slip"``;
 6. for estimators that give one: ``domain_embedding`` (a column of the row), the
    distance of the line from the estimator's training lines in units of its limit
    (the whole-line CNN: Mahalanobis distance of its pooled features from those of
