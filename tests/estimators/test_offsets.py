@@ -12,7 +12,9 @@ from stickslip.estimators.offsets import (
     OffsetPrior,
     compression_moment,
     coverage,
+    fit_friction_factor,
     friction_bounds,
+    friction_coverage,
     offset_half_width,
 )
 from stickslip.simulators import effects as fx
@@ -114,3 +116,49 @@ def test_the_default_compression_prior_is_the_saturation_familys_documented_rang
     assert (prior.p, prior.compression) == (s.p, tuple(s.compression))
     assert CompressionPrior.from_dict(prior.to_dict()) == prior
     assert CompressionPrior.from_family(fx.NuisancePrior().without("saturation").saturation).p == 0
+
+
+# ------------------------------------------------------------------ the model part's factor
+def test_the_coverage_of_a_line_with_a_known_error_is_that_of_the_priors_draws():
+    off, comp = OffsetPrior(), CompressionPrior()
+    r = np.array([-0.3, 0.0, 0.05, 0.4])
+    m3 = np.array([1.0, 2.0, 0.0, -1.5])
+    lo, hi = np.array([-0.4, -0.1, -0.5, -0.2]), np.array([0.3, 0.45, 0.5, 0.6])
+    got = friction_coverage(r, lo, hi, off, comp, m3)
+    rng = np.random.default_rng(3)
+    n = 400_000
+    for i in range(r.size):
+        x = r[i] + sample(off, 0.0, n, rng) + sample_compression(comp, m3[i], n, rng)
+        assert got[i] == pytest.approx(np.mean((x >= lo[i]) & (x <= hi[i])), abs=0.003)
+
+
+def test_gaussian_errors_need_no_factor_and_heavy_tailed_ones_a_narrower_core():
+    off = OffsetPrior()
+    rng = np.random.default_rng(8)
+    n = 40_000
+    s = rng.uniform(0.05, 0.4, n)  # each line's own error scale
+    gauss = rng.normal(0.0, s)
+    f = fit_friction_factor(gauss, lambda q: gaussian_z(q) * s, off, levels=(0.68, 0.95))
+    np.testing.assert_allclose(f, 1.0, atol=0.03)
+
+    # heavy tails: 15 % of the errors four times wider; the half-widths are the errors'
+    # own quantiles, so the Gaussian of the 95 % one has too wide a core
+    def errors(k: int) -> np.ndarray:
+        return np.where(rng.random(k) < 0.85, 1.0, 4.0) * rng.standard_normal(k)
+
+    ref = np.abs(errors(400_000))
+
+    def half_width(q: float) -> np.ndarray:
+        return np.quantile(ref, q) * s
+
+    (f95,) = fit_friction_factor(errors(n) * s, half_width, off, levels=(0.95,))
+    assert f95 < 0.98
+    # and it holds on fresh lines: new errors, new offsets drawn from the prior
+    fresh = errors(n) * s + sample(off, 0.0, n, rng)
+
+    def covered(factor: float) -> float:
+        lo, hi = friction_bounds(factor * half_width(0.95), 0.95, off)
+        return float(np.mean((fresh >= lo) & (fresh <= hi)))
+
+    assert covered(f95) == pytest.approx(0.95, abs=0.004)
+    assert covered(1.0) > covered(f95)  # without the factor: wider than it needs

@@ -1,23 +1,17 @@
-"""Interval arithmetic shared by the estimators that give intervals, and the line model's
-spread calibration.
+"""Interval arithmetic shared by the estimators that give intervals, and the classes of
+lines whose spread the line model calibrates separately.
 
-:class:`SpreadCalibration` maps an ensemble's raw predictive spread to calibrated
-interval half-widths. It is one object with everything the line model fits after
-training (stored as one entry of the model file):
+- :func:`gaussian_z`, :data:`Z68`, :data:`Z95`: a Gaussian's central half-widths;
+- :data:`SHAPE_LEVELS`: the levels at which a calibration stores its standardised
+  errors' quantiles;
+- :class:`SpreadClasses`: classes of lines read off the line itself (quiet or noisy,
+  resampled or not), each with its own scale factors.
 
-- ``classes``: classes of lines read off the line itself (:class:`SpreadClasses`);
-- ``scale`` and ``exponent``: per class and target, the calibrated std
-  ``scale * sd ** exponent`` (``sd`` the ensemble's raw std, standardised units);
-- ``misfit``: weights of the misfit features (:data:`MISFIT_FEATURES`, computed by the
-  ensemble from the line: how far the line is from what the networks know), which
-  multiply the std by ``exp(misfit . features)``;
-- ``shape``: the quantiles of ``|error| / calibrated std`` at :data:`SHAPE_LEVELS`, per
-  target, from which :meth:`SpreadCalibration.z_at` gives the half-width at any level;
-- ``floor``: per target, in target units, the half-range ``B`` of an additive nuisance
-  the line cannot reveal (for <F>: a constant force offset, which one line cannot tell
-  from friction). The interval at level ``q`` is widened by ``q * B``, the half-width of
-  a uniform offset on ``[-B, B]`` at that level, added to the model's half-width (a
-  bound on the quantile of the sum).
+The line model's calibration itself (per class and target, the calibrated std ``scale *
+sd ** exponent`` of the ensemble's raw std ``sd``, and the error shape) lives on the
+ensemble (:class:`stickslip.estimators.line.ensemble.LineEnsemble`) and is fitted by
+:func:`stickslip.estimators.line.training.calibrate`; the <F> interval's offset and
+compression terms are in :mod:`stickslip.estimators.offsets`.
 """
 
 from __future__ import annotations
@@ -89,8 +83,6 @@ class SpreadClasses:
         on_ref = np.abs(np.asarray(lattice_ratio, float) - 1.0) < 1e-6
         noisy = 2 + np.searchsorted(np.asarray(self.noise_edges), level)
         return np.where(level < self.quiet_below, np.where(on_ref, 0, 1), noisy).astype(int)
-
-    _from_level = from_level  # the name it had
 
     def to_dict(self) -> dict:
         return asdict(self)

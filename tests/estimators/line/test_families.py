@@ -13,7 +13,7 @@ from stickslip.estimators.line.families import (
     draw_family_lines,
 )
 from stickslip.estimators.line.modelfile import load_line_model
-from stickslip.estimators.offsets import OffsetPrior
+from stickslip.estimators.offsets import FRICTION_LEVELS, OffsetPrior
 from stickslip.simulators import PhysicalSettings, simulate
 from stickslip.simulators import effects as fx
 from stickslip.simulators.config import ParameterRange
@@ -83,3 +83,9 @@ def test_calibration_on_families_refits_only_the_spread(clean):
         prior=fx.NuisancePrior().without("crosstalk"), seed=11, draws=1))  # fmt: skip
     assert no_xt.offset == ens.offset == OffsetPrior.from_family(fx.Crosstalk())
     assert fc["offset"] == ens.offset.to_dict()
+    # the factor on the model's own <F> part is fitted against that same prior, whether
+    # or not the lines carry crosstalk (inside the bisection's range: a real fit)
+    for e in (ens, no_xt):
+        levels, factors = e.friction_factor
+        np.testing.assert_allclose(levels, FRICTION_LEVELS)
+        assert np.all((factors > 0.21) & (factors < 4.9)), factors

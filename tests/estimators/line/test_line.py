@@ -162,6 +162,18 @@ def test_line_model_file_round_trip_and_damage(tmp_path):
     down = comp.values["F_mean_nN"] - comp.lo95["F_mean_nN"]
     assert up > down and up > narrow / 2
     np.testing.assert_allclose(comp.F_model_std, without.std["F_mean_nN"])
+    # the factor on the model part round-trips and narrows that part only: the model's
+    # own std (a trace/retrace pair's) stays
+    ens.offset = OffsetPrior()
+    full = predict_lines(ens, lines, np.full(1, 0.246), np.full(1, 60.0), np.full(1, 1.5))
+    ens.friction_factor = np.array([[0.68, 0.95], [0.5, 0.5]])
+    back = load_line_model(save_line_model(ens, tmp_path / "f.pt", (16, 32, 48, 64), {}, {}, {}))
+    np.testing.assert_array_equal(back.friction_factor, ens.friction_factor)
+    half = predict_lines(ens, lines, np.full(1, 0.246), np.full(1, 60.0), np.full(1, 1.5))
+    assert half.hi95["F_mean_nN"] - half.lo95["F_mean_nN"] < \
+        full.hi95["F_mean_nN"] - full.lo95["F_mean_nN"]
+    np.testing.assert_allclose(half.F_model_std, full.F_model_std)
+    np.testing.assert_allclose(half.hi95["U0_eV"], full.hi95["U0_eV"])
     bad = tmp_path / "bad.pt"
     bad.write_bytes(path.read_bytes()[:500])
     with pytest.raises(ModelFileError, match="bad.pt"):

@@ -360,6 +360,10 @@ class LineEnsemble:
     #: contact, added to the single-line <F> interval (:class:`~stickslip.estimators.
     #: offsets.CompressionPrior`); None: no such term
     compression: CompressionPrior | None = None
+    #: (2, k): levels and the factors on the model's own <F> half-width that the
+    #: single-line interval, with the offset and compression terms, takes at them
+    #: (:func:`~stickslip.estimators.offsets.fit_friction_factor`); None: 1
+    friction_factor: np.ndarray | None = None
 
     def z_at(self, level: float) -> np.ndarray:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
@@ -367,6 +371,16 @@ class LineEnsemble:
         if self.shape is None:
             return np.full(len(TARGETS), gaussian_z(level))
         return np.array([np.interp(level, SHAPE_LEVELS, q) for q in self.shape])
+
+    def friction_z_at(self, level: float) -> float:
+        """Half-width at ``level``, in calibrated stds, of the model's own <F> error as
+        the single-line interval adds it to the offset and compression terms: ``z_at``
+        times the fitted :attr:`friction_factor` (interpolated between its levels)."""
+        z = float(self.z_at(level)[0])
+        if self.friction_factor is None:
+            return z
+        levels, factors = np.asarray(self.friction_factor, float)
+        return z * float(np.interp(level, levels, factors))
 
     def line_classes(self, X: torch.Tensor, C: torch.Tensor) -> np.ndarray:
         """Spread class of each input line (:class:`SpreadClasses`; all 0 without)."""
@@ -513,8 +527,9 @@ def predict_lines(
             m = m + np.asarray(trace_mean_nN, float)
             out.F_model_std = e
             m3 = 0.0 if trace_m3_nN is None else np.asarray(trace_m3_nN, float)
-            lo68, hi68 = friction_bounds(h68, 0.68, ens.offset, ens.compression, m3)
-            lo95, hi95 = friction_bounds(h95, 0.95, ens.offset, ens.compression, m3)
+            t68, t95 = (ens.friction_z_at(q) * sd[:, j] for q in (0.68, 0.95))
+            lo68, hi68 = friction_bounds(t68, 0.68, ens.offset, ens.compression, m3)
+            lo95, hi95 = friction_bounds(t95, 0.95, ens.offset, ens.compression, m3)
             out.values[name], out.std[name] = m, (hi68 - lo68) / (2.0 * Z68)
             out.lo68[name], out.hi68[name] = m + lo68, m + hi68
             out.lo95[name], out.hi95[name] = m + lo95, m + hi95

@@ -38,7 +38,7 @@ from stickslip.estimators.line.training import (
     line_targets,
     training_effects,
 )
-from stickslip.estimators.offsets import CompressionPrior, OffsetPrior
+from stickslip.estimators.offsets import CompressionPrior, OffsetPrior, compression_moment
 from stickslip.simulators import effects as fx
 from stickslip.simulators.instrument import apply_instrument
 from stickslip.traces.dataset import Dataset
@@ -184,7 +184,8 @@ def calibration_lines(ens: LineEnsemble, lines: FamilyLines, offset: bool = Fals
     mapped = [map_line(d.x_nm, f, ai, spec) for f, ai in zip(d.force_nN, a, strict=True)]
     cs = ValidationSet(lines=mapped, C=conditioning(a, p["velocity_nm_per_s"], spec),
                        rows=lines.rows, strata=np.zeros(d.n, int),
-                       observed_mean=d.force_nN.mean(axis=1))  # fmt: skip
+                       observed_mean=d.force_nN.mean(axis=1),
+                       m3_nN=compression_moment(np.asarray(d.force_nN, float)))  # fmt: skip
     # with an offset term the model answers for what the line shows: friction + offset
     F = p["F_mean_nN"] + (p["offset_nN"] if offset and "offset_nN" in p else 0.0)
     return cs, line_targets(p["U0_eV"], p["K_N_m"], F, a, spec)
@@ -210,7 +211,8 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                            rows=np.concatenate([cs.rows, mild.rows]),
                            strata=np.concatenate([cs.strata, np.ones(len(mild.lines), int)]),
                            observed_mean=np.concatenate([cs.observed_mean,
-                                                         mild.observed_mean]))  # fmt: skip
+                                                         mild.observed_mean]),
+                           m3_nN=np.concatenate([cs.m3_nN, mild.m3_nN]))  # fmt: skip
         Y = np.concatenate([Y, Y_mild])
     power = ens.exponent is not None and not np.allclose(ens.exponent, 1.0)
     ens.offset, ens.compression = settings.offset, settings.compression

@@ -15,6 +15,12 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
     shape               quantiles of the calibrated |error| / std at SHAPE_LEVELS, per
                         target (absent: Gaussian intervals)
     spread_classes      SpreadClasses as a dict (absent: one scale row for all lines)
+    offset_prior        OffsetPrior as a dict: the offsets the single-line <F> interval
+                        carries (absent: none)
+    compression_prior   CompressionPrior as a dict: the compressions it carries (absent:
+                        none)
+    friction_factor     (2, k) levels and factors on the model's own <F> half-width in
+                        that interval (absent: 1)
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data
     metrics             validation metrics recorded at training time
@@ -73,7 +79,8 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
         "metrics": _plain(metrics),
     }
     payload["spread_hidden"] = ens.members[0].spread_hidden
-    for key in ("exponent", "shape"):  # absent: a plain scale and Gaussian intervals
+    # absent: a plain scale, Gaussian intervals, no factor on the <F> model part
+    for key in ("exponent", "shape", "friction_factor"):
         if getattr(ens, key) is not None:
             payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
     if ens.classes is not None:
@@ -125,6 +132,8 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             classes=classes,
             exponent=payload["exponent"].numpy() if "exponent" in payload else None,
             shape=payload["shape"].numpy() if "shape" in payload else None,
+            friction_factor=(payload["friction_factor"].numpy()
+                             if "friction_factor" in payload else None),  # fmt: skip
             offset=(OffsetPrior.from_dict(payload["offset_prior"])
                     if "offset_prior" in payload else None),  # fmt: skip
             compression=(CompressionPrior.from_dict(payload["compression_prior"])

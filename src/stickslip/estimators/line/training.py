@@ -84,6 +84,7 @@ from stickslip.estimators.line.ensemble import (
     predict_std_lines,
 )
 from stickslip.estimators.line.streaming import LineBatches, StreamSettings, batch_loader
+from stickslip.estimators.offsets import FRICTION_LEVELS, fit_friction_factor
 from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.simulators import effects as fx
@@ -354,6 +355,9 @@ class ValidationSet:
     rows: np.ndarray
     strata: np.ndarray
     observed_mean: np.ndarray
+    #: each line's :func:`~stickslip.estimators.offsets.compression_moment` on its own
+    #: samples (nN), which sizes the <F> compression term (None: 0)
+    m3_nN: np.ndarray | None = None
 
 
 def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainConfig,
@@ -440,9 +444,13 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
     """Fit the spread calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
     :func:`line_targets` units): per class of line when ``classes`` is given (else one
     class, strata weighing equally), :func:`class_fit`, then the standardised errors'
-    quantiles (``ens.shape``). Returns the standardised predictive means, the calibrated
-    ``|z|`` and the class of every calibration line."""
+    quantiles (``ens.shape``); where the model has <F> offset or compression terms,
+    also the factor those intervals take on the model's own half-width
+    (:func:`~stickslip.estimators.offsets.fit_friction_factor`, on ``cs.m3_nN``).
+    Returns the standardised predictive means, the calibrated ``|z|`` and the class of
+    every calibration line."""
     ens.scale, ens.exponent, ens.shape, ens.classes = np.ones(len(TARGETS)), None, None, classes
+    ens.friction_factor = None
     mu, sd = predict_std_lines(ens, cs.lines, cs.C)
     err = np.abs(mu - _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean,
                                             ens.y_std).numpy())  # fmt: skip
@@ -459,6 +467,14 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
     w = np.ones(cls.size) if per_class else _stratum_weights(cs.strata)
     ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
                           for j in range(z_cal.shape[1])])  # fmt: skip
+    if ens.offset is not None or ens.compression is not None:
+        sd_F = (scale[cls, 0] * sd[:, 0] ** exponent[cls, 0]) * float(ens.y_std[0])  # nN
+        shown = Y_cal[:, 0] - cs.observed_mean  # what the line shows, as the model reads it
+        r = shown - (mu[:, 0] * float(ens.y_std[0]) + float(ens.y_mean[0]))
+        m3 = 0.0 if cs.m3_nN is None else cs.m3_nN
+        factors = fit_friction_factor(r, lambda q: float(ens.z_at(q)[0]) * sd_F, ens.offset,
+                                      ens.compression, m3, w)  # fmt: skip
+        ens.friction_factor = np.array([FRICTION_LEVELS, factors])
     return mu, z_cal, cls
 
 
@@ -485,6 +501,10 @@ def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray
         "val_coverage68": named(np.mean(z_cal <= z68, axis=0)),
         "interval_z68": named(z68),
     }
+    if ens.friction_factor is not None:
+        levels, factors = ens.friction_factor
+        report["friction_factor"] = {f"{q:g}": float(f) for q, f in zip(levels, factors,
+                                                                         strict=True)}  # fmt: skip
     if classes is None:
         report["calibration_scale"] = named(ens.scale)
         report["calibration_exponent"] = named(ens.exponent)
