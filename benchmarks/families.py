@@ -8,7 +8,9 @@ How the sets are made (independently of training and of each other):
   training set uses these seeds;
 - calibration lines: ``--draws`` draws per calibration trajectory of the nuisance
   prior (:mod:`stickslip.simulators.effects`) with the ``"train"`` implementation of
-  every family (seed 5101);
+  every family (seed 5101), each line's constant offset then drawn afresh from the
+  documented offset prior (:func:`~stickslip.estimators.line.families.restate_offsets`,
+  in every calibration, leave-one-family-out included);
 - evaluation sets, all with the ``"eval"`` implementations (other functional forms
   over the same documented ranges), one draw per evaluation trajectory: ``clean`` (no
   effect), ``all`` (every family at its documented probability, seed 6101) and, per

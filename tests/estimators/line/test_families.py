@@ -11,6 +11,7 @@ from stickslip.estimators.line.families import (
     FamilyCalibration,
     calibrate_on_families,
     draw_family_lines,
+    restate_offsets,
 )
 from stickslip.estimators.line.modelfile import load_line_model
 from stickslip.estimators.offsets import FRICTION_LEVELS, OffsetPrior
@@ -53,6 +54,29 @@ def test_lines_carry_truths_and_stated_conditions(clean):
     # a family left out of the prior is never applied
     j = fx.FAMILIES.index("crosstalk")
     assert not draw_family_lines(clean, prior.without("crosstalk"), 3).applied[:, j].any()
+
+
+def test_offsets_are_restated_from_the_documented_prior(clean):
+    prior = fx.NuisancePrior().replace("crosstalk", p=1.0)
+    lines = draw_family_lines(clean, prior, seed=4, draws=5)
+    off = OffsetPrior(p=0.5, mean_nN=(0.1, 0.3))
+    out = restate_offsets(lines, off, seed=9)
+    new, old = out.data.params["offset_nN"], lines.data.params["offset_nN"]
+    # each line moves by exactly the change of its constant offset: the crosstalk's
+    # variation along the line and everything else stay
+    shift = out.data.force_nN - lines.data.force_nN
+    np.testing.assert_allclose(shift, np.broadcast_to((new - old)[:, None], shift.shape),
+                               atol=1e-12)  # fmt: skip
+    # the new offsets follow the prior: none on about half the lines, else |o| in range
+    some = new != 0.0
+    assert 0.35 < some.mean() < 0.65
+    assert np.all((np.abs(new[some]) >= 0.1) & (np.abs(new[some]) <= 0.3))
+    assert 0.3 < np.mean(new[some] > 0) < 0.7
+    # the truths are untouched; lines without crosstalk get offsets as well
+    np.testing.assert_array_equal(out.data.params["F_mean_nN"], lines.data.params["F_mean_nN"])
+    plain = draw_family_lines(clean, prior.without("crosstalk"), seed=4)
+    assert np.all(plain.data.params["offset_nN"] == 0.0)
+    assert np.any(restate_offsets(plain, off, seed=9).data.params["offset_nN"] != 0.0)
 
 
 def test_calibration_on_families_refits_only_the_spread(clean):

@@ -57,9 +57,13 @@ class FamilyCalibration:
     offset : the offsets one line cannot tell from friction, added to the single-line
         <F> interval (:mod:`stickslip.estimators.offsets`; by default the crosstalk
         family's documented range, whether or not the prior holds that family: it is
-        not fitted). The calibration then fits the model's <F> error against the
-        friction plus each line's crosstalk mean, what the line shows. None: no such
-        term, and the offsets are left to the fitted calibration.
+        not fitted). Every calibration line's constant offset is drawn afresh from it
+        (:func:`restate_offsets`), so the calibration of U0, K and eta, which the
+        members read partly off the force's level, meets offsets at the documented
+        rate even where the prior leaves crosstalk out. The calibration then fits the
+        model's <F> error against the friction plus each line's offset, what the line
+        shows. None: no such term, and the offsets are left to the fitted
+        calibration.
     compression : compressions of large signals, which one line cannot tell from a
         softer contact, added to the single-line <F> interval (:class:`~stickslip.
         estimators.offsets.CompressionPrior`; by default the saturation family's
@@ -153,6 +157,28 @@ def draw_family_lines(clean: Dataset, prior: fx.NuisancePrior, seed: int, draws:
     return FamilyLines(data, np.vstack([a for _, _, _, a in parts]), rows)
 
 
+def restate_offsets(lines: FamilyLines, prior: OffsetPrior, seed: int) -> FamilyLines:
+    """The lines with each one's constant offset drawn afresh from ``prior``.
+
+    A constant offset is an ambiguity one line cannot resolve, documented rather than
+    fitted (:mod:`stickslip.estimators.offsets`): the members read the force's level, so
+    it moves U0, K and eta as well as <F>. Every calibration meets it at the documented
+    rate, whether or not its prior holds the crosstalk family: each line's crosstalk
+    mean (``offset_nN``) is replaced by an offset of the prior (none with probability
+    ``1 - p``), and ``offset_nN`` says the new one. Crosstalk's variation along the line
+    stays where the family put it.
+    """
+    d = lines.data
+    rng = np.random.default_rng([seed, 7])
+    n = d.n
+    new = (rng.uniform(*prior.mean_nN, n) * rng.choice([-1.0, 1.0], n)
+           * (rng.random(n) < prior.p))  # fmt: skip
+    old = np.asarray(d.params.get("offset_nN", np.zeros(n)), float)
+    force = np.asarray(d.force_nN, float) + (new - old)[:, None]
+    data = Dataset(force, d.x_nm, {**d.params, "offset_nN": new}, d.attrs)
+    return FamilyLines(data, lines.applied, lines.rows)
+
+
 def draw_training_lines(clean: Dataset, seed: int, draws: int = 1) -> FamilyLines:
     """``draws`` draws of the line model's training effects on every clean trajectory
     (:func:`~stickslip.estimators.line.training.training_effects`; a
@@ -203,6 +229,8 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     settings = settings or FamilyCalibration()
     lines = draw_family_lines(clean, settings.prior, settings.seed, settings.draws,
                               settings.implementation)  # fmt: skip
+    if settings.offset is not None:
+        lines = restate_offsets(lines, settings.offset, settings.seed)
     cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None)
     if settings.training_draws:
         mild, Y_mild = calibration_lines(ens, draw_training_lines(clean, settings.seed,
