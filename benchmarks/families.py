@@ -73,7 +73,7 @@ from stickslip.estimators.line.modelfile import (
     load_line_model,
     save_line_model,
 )
-from stickslip.estimators.pairs import pair_friction
+from stickslip.estimators.pairs import pair_friction, pair_parameters
 from stickslip.estimators.table import TARGETS
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
@@ -148,11 +148,14 @@ def lab_prior(prior: fx.NuisancePrior) -> fx.NuisancePrior:
 
 def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> dict:
     """<F> of single rows and of the pairs (:func:`stickslip.estimators.pairs.pair_friction`)
-    against their truths, on trajectories in the eta window."""
+    against their truths, and U0 and K of single rows and of the pairs
+    (:func:`~stickslip.estimators.pairs.pair_parameters`), on trajectories in the eta
+    window."""
     ok = in_eta_window(trace.params["eta"])
     rows = [estimator.predict(dataset_traces(d)).rows for d in (trace, retrace)]
     truth = 0.5 * (trace.params["F_mean_nN"] + retrace.params["F_mean_nN"])
     single, pair, covered = [], [], []
+    logs: dict[str, list] = {k: [[], [], [], []] for k in ("U0", "K")}  # single, pair, covs
     for i in np.flatnonzero(ok):
         rt, rr = rows[0][i], rows[1][i]
         single += [rt["F_mean_nN"] - trace.params["F_mean_nN"][i],
@@ -160,9 +163,23 @@ def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> d
         cols = pair_friction(rt, rr)
         pair.append(cols["friction_pair_nN"] - truth[i])
         covered.append(cols["friction_pair_nN_lo95"] <= truth[i] <= cols["friction_pair_nN_hi95"])
-    return {"n_pairs": int(ok.sum()), "single_rmse_nN": float(np.sqrt(np.mean(np.square(single)))),
-            "pair_rmse_nN": float(np.sqrt(np.mean(np.square(pair)))),
-            "pair_coverage95": float(np.mean(covered))}  # fmt: skip
+        params = pair_parameters(rt, rr)
+        for k, key, name in (("U0", "U0_eV", "U0_pair_eV"), ("K", "K_N_m", "K_pair_N_m")):
+            t = trace.params[key][i]
+            s_err, p_err, s_cov, p_cov = logs[k]
+            s_err += [np.log(rt[key] / t), np.log(rr[key] / t)]
+            s_cov += [r[f"{key}_lo95"] <= t <= r[f"{key}_hi95"] for r in (rt, rr)]
+            p_err.append(np.log(params[name] / t))
+            p_cov.append(params[f"{name}_lo95"] <= t <= params[f"{name}_hi95"])
+    out = {"n_pairs": int(ok.sum()), "single_rmse_nN": float(np.sqrt(np.mean(np.square(single)))),
+           "pair_rmse_nN": float(np.sqrt(np.mean(np.square(pair)))),
+           "pair_coverage95": float(np.mean(covered))}  # fmt: skip
+    for k, (s_err, p_err, s_cov, p_cov) in logs.items():
+        out[f"{k}_single_rel_rmse"] = float(np.sqrt(np.mean(np.square(s_err))))
+        out[f"{k}_pair_rel_rmse"] = float(np.sqrt(np.mean(np.square(p_err))))
+        out[f"{k}_single_coverage95"] = float(np.mean(s_cov))
+        out[f"{k}_pair_coverage95"] = float(np.mean(p_cov))
+    return out
 
 
 HEAD = f"  {'set':26s} {'n':>4s}  95 % cov <F>  U0    K     eta     U0 rel  K rel  <F> nN  in dom"
@@ -245,6 +262,11 @@ def main() -> None:
               f"families): {pairs['n_pairs']} pairs; <F> RMSE single rows "
               f"{pairs['single_rmse_nN']:.3f} nN, friction_pair_nN {pairs['pair_rmse_nN']:.3f} "
               f"nN, its 95 % coverage {pairs['pair_coverage95']:.3f}")  # fmt: skip
+        for k in ("U0", "K"):
+            print(f"  {k}: relative RMSE (of ln) single rows {pairs[f'{k}_single_rel_rmse']:.3f}"
+                  f", pair {pairs[f'{k}_pair_rel_rmse']:.3f}; 95 % coverage single rows "
+                  f"{pairs[f'{k}_single_coverage95']:.3f}, pair "
+                  f"{pairs[f'{k}_pair_coverage95']:.3f}")  # fmt: skip
     if not args.no_lofo:
         print(f"\nleave-one-family-out: calibrated without f, scored on 'with f'\n{HEAD}")
         for f in families:

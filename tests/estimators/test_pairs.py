@@ -7,12 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from stickslip.estimators.calibration import Z68
 from stickslip.estimators.pairs import (
     OFFSET,
     PAIR,
     add_pair_columns,
     find_pairs,
     pair_friction,
+    pair_parameters,
 )
 from stickslip.traces.formats.common import Channel, ScanFile
 from stickslip.traces.formats.maps import friction_loop, map_to_traces
@@ -138,3 +140,53 @@ def test_rows_without_a_friction_estimate_get_no_pair_columns():
     rows[1] = {"trace": traces[1].name, "quality": "too few slips"}
     assert add_pair_columns(rows, traces) == 0
     assert PAIR not in rows[0] and PAIR not in rows[1]
+
+
+def pt_row(U0: float, K: float, eta: float, half_width_ln: float | None) -> dict:
+    """A row with log-normal intervals of the given log half-width (68 %; twice at 95 %)."""
+    row: dict = {"U0_eV": U0, "K_N_m": K, "eta": eta}
+    if half_width_ln is not None:
+        for key, v in (("U0_eV", U0), ("K_N_m", K), ("eta", eta)):
+            for b, z in (("lo68", -1), ("hi68", 1), ("lo95", -2), ("hi95", 2)):
+                row[f"{key}_{b}"] = v * np.exp(z * half_width_ln)
+    return row
+
+
+def test_an_offset_that_moves_the_two_directions_apart_cancels_in_the_pair_parameters():
+    # an offset reads as +d in one direction's ln U0 and -d in the other's
+    d, h = 0.2, 0.1
+    t = pt_row(2.0 * np.exp(d), 10.0 * np.exp(-d / 2), 5.0 * np.exp(d), h)
+    r = pt_row(2.0 * np.exp(-d), 10.0 * np.exp(d / 2), 5.0 * np.exp(-d), h)
+    out = pair_parameters(t, r)
+    assert out["U0_pair_eV"] == pytest.approx(2.0)
+    assert out["K_pair_N_m"] == pytest.approx(10.0)
+    assert out["eta_pair"] == pytest.approx(5.0)
+    # the rows' log half-widths combine as independent errors: h / sqrt(2)
+    assert np.log(out["U0_pair_eV_hi68"] / out["U0_pair_eV"]) == pytest.approx(h / np.sqrt(2))
+    assert np.log(out["U0_pair_eV"] / out["U0_pair_eV_lo95"]) == pytest.approx(2 * h / np.sqrt(2))
+    # the std is the log-normal's with that 68 % interval
+    e = h / np.sqrt(2) / Z68
+    assert out["U0_pair_eV_std"] == pytest.approx(2.0 * np.sqrt(np.expm1(e * e) * np.exp(e * e)))
+
+
+def test_pair_parameters_need_both_rows():
+    full = pt_row(2.0, 10.0, 5.0, 0.1)
+    # no intervals on one row: the values only
+    out = pair_parameters(full, pt_row(2.2, 11.0, 5.5, None))
+    assert out["U0_pair_eV"] == pytest.approx(np.sqrt(2.0 * 2.2))
+    assert "U0_pair_eV_lo95" not in out and "U0_pair_eV_std" not in out
+    # a row without U0 (a refusal) or with a non-positive one gives no U0 pair
+    assert "U0_pair_eV" not in pair_parameters(full, {"quality": "too noisy"})
+    assert "K_pair_N_m" not in pair_parameters(full, {**full, "K_N_m": 0.0})
+
+
+def test_map_rows_get_the_pair_parameters_on_both_rows():
+    scan, _ = synthetic_map(lines=2)
+    traces = map_to_traces(scan)
+    rows = [{**r, **pt_row(2.0 + 0.1 * i, 10.0, 5.0, 0.1)} for i, r in
+            enumerate(mean_rows(traces))]  # fmt: skip
+    assert add_pair_columns(rows, traces) == 2
+    for it, ir in find_pairs(traces):
+        assert rows[it]["U0_pair_eV"] == rows[ir]["U0_pair_eV"]
+        both = rows[it]["U0_eV"] * rows[ir]["U0_eV"]
+        assert rows[it]["U0_pair_eV"] == pytest.approx(np.sqrt(both))

@@ -31,6 +31,18 @@ intervals ~1/sqrt(2) as wide; but the rows share the line, the substrate, the mo
 its systematic errors, so independence would claim a precision the pair does not have.
 Where the rows' errors are dominated by the offset, which enters them with opposite
 signs, the pair is better than this bound says; it is never worse for Gaussian errors.
+
+The PT parameters of the pair. A learned model reads U0, K and eta partly off the
+force's level, so an offset moves them too, up in one direction and down in the other
+(``docs/robustness.md``, "Offsets restated in every calibration"). The pair's
+``U0_pair_eV``, ``K_pair_N_m`` and ``eta_pair`` are the geometric means of the two
+rows' estimates (the mean of their logarithms), where the offset's first-order effect
+cancels. Their intervals combine the rows' log half-widths as for independent errors,
+``sqrt(h_t^2 + h_r^2) / 2`` per side: the rows' intervals carry the offset's effect,
+which cancels in the pair, so the fully correlated bound of the friction is too wide
+here (on ``benchmarks/families.py``'s pairs of pool 601 it covered 0.984-0.995; this
+rule 0.924-0.948, and 0.919-0.948 on pools 602 and 603). The std is the log-normal's
+with the pair's 68 % interval, as the line model gives it.
 """
 
 from __future__ import annotations
@@ -55,6 +67,8 @@ UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
 #: the std of a row's <F> error without the offset and compression terms (line model
 #: with those priors, :mod:`stickslip.estimators.offsets`)
 MODEL_STD = "F_model_std_nN"
+#: The pair's PT parameters: each row's column and the pair's (module docstring).
+PARAMETER_PAIRS = {"U0_eV": "U0_pair_eV", "K_N_m": "K_pair_N_m", "eta": "eta_pair"}
 
 
 def pair_key(trace: Trace) -> tuple[Hashable, ...] | None:
@@ -119,6 +133,32 @@ def pair_friction(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
     return out
 
 
+def pair_parameters(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
+                    ) -> dict[str, float]:  # fmt: skip
+    """The pair's ``U0_pair_eV``, ``K_pair_N_m`` and ``eta_pair`` (see the module
+    docstring), each where both rows have a positive estimate, with intervals where
+    both rows have all four bounds."""
+    out: dict[str, float] = {}
+    for key, name in PARAMETER_PAIRS.items():
+        vt, vr = _value(trace_row, key), _value(retrace_row, key)
+        if not (vt > 0.0 and vr > 0.0):  # also False for NaN
+            continue
+        m = 0.5 * (np.log(vt) + np.log(vr))
+        out[name] = float(np.exp(m))
+        bounds = {b: (_value(trace_row, f"{key}_{b}"), _value(retrace_row, f"{key}_{b}"))
+                  for b in BOUNDS}  # fmt: skip
+        if not all(t > 0.0 and r > 0.0 for t, r in bounds.values()):
+            continue
+        for b, (bt, br) in bounds.items():
+            # each row's log half-width on this side, combined as independent errors
+            ht, hr = abs(np.log(bt) - np.log(vt)), abs(np.log(br) - np.log(vr))
+            sign = -1.0 if b.startswith("lo") else 1.0
+            out[f"{name}_{b}"] = float(np.exp(m + sign * 0.5 * np.hypot(ht, hr)))
+        e = (np.log(out[f"{name}_hi68"]) - np.log(out[f"{name}_lo68"])) / (2.0 * Z68)
+        out[f"{name}_std"] = float(np.exp(m) * np.sqrt(np.expm1(e * e) * np.exp(e * e)))
+    return out
+
+
 def add_pair_columns(rows: Sequence[MutableMapping[str, Any]],
                      traces: Sequence[Trace | None]) -> int:  # fmt: skip
     """Put the pair's columns on both rows of every trace/retrace pair; returns the
@@ -128,6 +168,7 @@ def add_pair_columns(rows: Sequence[MutableMapping[str, Any]],
         cols = pair_friction(rows[it], rows[ir])
         if not cols:
             continue
+        cols.update(pair_parameters(rows[it], rows[ir]))
         for i, other in ((it, ir), (ir, it)):
             rows[i].update(cols)
             rows[i]["pair_trace"] = rows[other].get("trace")

@@ -140,7 +140,9 @@ def infer(
     if n_pairs:
         table.notes.append(f"{n_pairs} trace/retrace pair(s): friction_pair_* is the mean of "
                            "both directions' friction, free of offsets that do not reverse "
-                           "with the scan")  # fmt: skip
+                           "with the scan; U0_pair_*, K_pair_*, eta_pair* the geometric "
+                           "means of both directions' estimates, which an offset moves "
+                           "in opposite directions")  # fmt: skip
     if classical and estimator.kind != "classical" and traces:
         cl_estimator = ClassicalEstimator()
         cl_estimator.domain_verdict = False  # only its estimates are shown beside
