@@ -11,6 +11,7 @@ from stickslip.estimators.calibration import Z68
 from stickslip.estimators.pairs import (
     OFFSET,
     PAIR,
+    PAIR_COLUMNS,
     add_pair_columns,
     find_pairs,
     pair_friction,
@@ -185,7 +186,11 @@ def test_map_rows_get_the_pair_parameters_on_both_rows():
     traces = map_to_traces(scan)
     rows = [{**r, **pt_row(2.0 + 0.1 * i, 10.0, 5.0, 0.1)} for i, r in
             enumerate(mean_rows(traces))]  # fmt: skip
+    before = [set(r) for r in rows]
     assert add_pair_columns(rows, traces) == 2
+    # every column a pair adds is a documented one, and all of them are there
+    for r, keys in zip(rows, before, strict=True):
+        assert set(r) - keys == set(PAIR_COLUMNS)
     for it, ir in find_pairs(traces):
         assert rows[it]["U0_pair_eV"] == rows[ir]["U0_pair_eV"]
         both = rows[it]["U0_eV"] * rows[ir]["U0_eV"]

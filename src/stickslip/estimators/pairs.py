@@ -60,7 +60,7 @@ from stickslip.traces.trace import Trace
 FRICTION = "F_mean_nN"
 PAIR = "friction_pair_nN"
 OFFSET = "offset_pair_nN"
-PAIR_COLUMNS = (PAIR, f"{PAIR}_std", *(f"{PAIR}_{b}" for b in BOUNDS), OFFSET, "pair_trace")
+
 #: Rows of traces in volts (no calibration) carry their friction as ``F_mean_V``: their
 #: pair's columns are ``friction_pair_V ...``, ``offset_pair_V``.
 UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
@@ -69,6 +69,10 @@ UNITS = {"F_mean_nN": "nN", "F_mean_V": "V"}
 MODEL_STD = "F_model_std_nN"
 #: The pair's PT parameters: each row's column and the pair's (module docstring).
 PARAMETER_PAIRS = {"U0_eV": "U0_pair_eV", "K_N_m": "K_pair_N_m", "eta": "eta_pair"}
+#: The columns a pair puts on both of its rows (in nN; volts rows: ``*_V``).
+PAIR_COLUMNS = (PAIR, f"{PAIR}_std", *(f"{PAIR}_{b}" for b in BOUNDS), OFFSET, "pair_trace",
+                *(f"{p}{s}" for p in PARAMETER_PAIRS.values()
+                  for s in ("", "_std", *(f"_{b}" for b in BOUNDS))))  # fmt: skip
 
 
 def pair_key(trace: Trace) -> tuple[Hashable, ...] | None:

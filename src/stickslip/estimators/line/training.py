@@ -469,8 +469,10 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
                           for j in range(z_cal.shape[1])])  # fmt: skip
     if ens.offset is not None or ens.compression is not None:
         sd_F = (scale[cls, 0] * sd[:, 0] ** exponent[cls, 0]) * float(ens.y_std[0])  # nN
-        shown = Y_cal[:, 0] - cs.observed_mean  # what the line shows, as the model reads it
-        r = shown - (mu[:, 0] * float(ens.y_std[0]) + float(ens.y_mean[0]))
+        # signed error against what the line shows (friction + offset), both relative to
+        # the line's own mean as the members answer it
+        target = Y_cal[:, 0] - cs.observed_mean
+        r = target - (mu[:, 0] * float(ens.y_std[0]) + float(ens.y_mean[0]))
         m3 = 0.0 if cs.m3_nN is None else cs.m3_nN
         factors = fit_friction_factor(r, lambda q: float(ens.z_at(q)[0]) * sd_F, ens.offset,
                                       ens.compression, m3, w)  # fmt: skip
