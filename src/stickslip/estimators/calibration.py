@@ -2,6 +2,7 @@
 lines whose spread the line model calibrates separately.
 
 - :func:`gaussian_z`, :data:`Z68`, :data:`Z95`: a Gaussian's central half-widths;
+  :func:`lognormal_std`: the std of a log-normal interval;
 - :data:`SHAPE_LEVELS`: the levels at which a calibration stores its standardised
   errors' quantiles;
 - :class:`SpreadClasses`: classes of lines read off the line itself (quiet or noisy,
@@ -34,6 +35,14 @@ def gaussian_z(level: float) -> float:
 
 #: Two-sided 68 % and 95 % Gaussian quantiles: the half-widths of those intervals in stds.
 Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)
+
+
+def lognormal_std(median, sigma_ln):
+    """Standard deviation of a log-normal with median ``median`` and std ``sigma_ln`` of
+    its logarithm (arrays broadcast): how a ``*_std`` column states an interval that is
+    symmetric in log space (U0, K, eta)."""
+    s2 = np.square(sigma_ln)
+    return median * np.sqrt(np.expm1(s2) * np.exp(s2))
 
 
 @dataclass(frozen=True)

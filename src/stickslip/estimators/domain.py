@@ -84,7 +84,7 @@ import numba
 import numpy as np
 from numba import njit
 
-from stickslip.estimators.calibration import Z68
+from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
 from stickslip.robust import mad_sigma, median, select
 
@@ -412,7 +412,7 @@ def widen_rows(rows: Sequence[MutableMapping[str, Any]], factor: float = WIDEN_F
             lo, hi = bounds["lo68"], bounds["hi68"]
             from68 = log & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
             e = np.log(hi / lo) / (2.0 * Z68)
-            lognormal = m * np.sqrt(np.expm1(e * e) * np.exp(e * e))
+            lognormal = lognormal_std(m, e)
             _put(rows, f"{k}_std", np.where(from68, lognormal, factor * sd), ok)
 
 

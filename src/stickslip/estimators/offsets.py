@@ -71,6 +71,11 @@ class OffsetPrior:
         p = float(family.p) if family.enabled else 0.0
         return cls(p=p, mean_nN=(float(family.mean_nN[0]), float(family.mean_nN[1])))
 
+    def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` offsets (nN) drawn from the prior: 0 with probability ``1 - p``."""
+        size = rng.uniform(*self.mean_nN, n)
+        return size * rng.choice([-1.0, 1.0], n) * (rng.random(n) < self.p)
+
     def to_dict(self) -> dict:
         return {"p": self.p, "mean_nN": list(self.mean_nN)}
 

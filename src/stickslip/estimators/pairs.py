@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from stickslip.estimators.calibration import Z68, Z95
+from stickslip.estimators.calibration import Z68, Z95, lognormal_std
 from stickslip.estimators.table import BOUNDS, is_missing
 from stickslip.traces.formats.common import RETRACE, TRACE
 from stickslip.traces.trace import Trace
@@ -159,7 +159,7 @@ def pair_parameters(trace_row: Mapping[str, Any], retrace_row: Mapping[str, Any]
             sign = -1.0 if b.startswith("lo") else 1.0
             out[f"{name}_{b}"] = float(np.exp(m + sign * 0.5 * np.hypot(ht, hr)))
         e = (np.log(out[f"{name}_hi68"]) - np.log(out[f"{name}_lo68"])) / (2.0 * Z68)
-        out[f"{name}_std"] = float(np.exp(m) * np.sqrt(np.expm1(e * e) * np.exp(e * e)))
+        out[f"{name}_std"] = float(lognormal_std(np.exp(m), e))
     return out
 
 

@@ -45,7 +45,13 @@ import torch
 from torch import nn
 
 from stickslip.conditions import GRAPHITE, Reference
-from stickslip.estimators.calibration import SHAPE_LEVELS, Z68, SpreadClasses, gaussian_z
+from stickslip.estimators.calibration import (
+    SHAPE_LEVELS,
+    Z68,
+    SpreadClasses,
+    gaussian_z,
+    lognormal_std,
+)
 from stickslip.estimators.mapping import to_reference
 from stickslip.estimators.offsets import (
     CompressionPrior,
@@ -536,8 +542,7 @@ def predict_lines(
             continue
         m = m + shift[name]
         out.values[name] = np.exp(m)
-        # standard deviation of the log-normal
-        out.std[name] = np.exp(m) * np.sqrt(np.expm1(e**2) * np.exp(e**2))
+        out.std[name] = lognormal_std(np.exp(m), e)
         out.lo68[name], out.hi68[name] = np.exp(m - h68), np.exp(m + h68)
         out.lo95[name], out.hi95[name] = np.exp(m - h95), np.exp(m + h95)
     return out

@@ -169,11 +169,8 @@ def restate_offsets(lines: FamilyLines, prior: OffsetPrior, seed: int) -> Family
     stays where the family put it.
     """
     d = lines.data
-    rng = np.random.default_rng([seed, 7])
-    n = d.n
-    new = (rng.uniform(*prior.mean_nN, n) * rng.choice([-1.0, 1.0], n)
-           * (rng.random(n) < prior.p))  # fmt: skip
-    old = np.asarray(d.params.get("offset_nN", np.zeros(n)), float)
+    new = prior.draw(d.n, np.random.default_rng([seed, 7]))
+    old = np.asarray(d.params.get("offset_nN", np.zeros(d.n)), float)
     force = np.asarray(d.force_nN, float) + (new - old)[:, None]
     data = Dataset(force, d.x_nm, {**d.params, "offset_nN": new}, d.attrs)
     return FamilyLines(data, lines.applied, lines.rows)
