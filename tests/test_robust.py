@@ -3,8 +3,9 @@ selection (ties, sorted runs, digitised lines, NaN)."""
 
 import numpy as np
 import pytest
+from numba import njit
 
-from stickslip.robust import mad_sigma, median, select
+from stickslip.robust import mad_sigma, median, percentile, select, select_tails
 
 
 def _cases():
@@ -26,10 +27,31 @@ def test_median_and_select_are_numpy_s(v):
     np.testing.assert_array_equal(v, before)  # the input is not reordered
 
 
+@njit
+def _numba_percentile(v, q):
+    return np.percentile(v, q)
+
+
+@pytest.mark.parametrize("v", _cases(), ids=lambda v: f"n{v.size}")
+def test_tails_and_percentiles_are_those_they_replace(v):
+    before = v.copy()
+    n = v.size
+    for lo, hi in {(0, n - 1), (int(0.02 * (n - 1)), int(0.98 * (n - 1))), (n // 3, n // 2)}:
+        # both short buffers and, for long tails, the fallback to two selections
+        assert select_tails(v, lo, hi) == (select(v, lo), select(v, hi))
+    for q in (0.0, 5.0, 25.0, 50.0, 75.0, 95.0, 100.0):
+        if np.all(np.isfinite(v)):  # numba's percentile has its own rules for infinities
+            assert percentile(v, q) == _numba_percentile(v, q)
+    np.testing.assert_array_equal(v, before)
+
+
 def test_nan_and_empty_inputs():
     assert np.isnan(median(np.array([1.0, np.nan, 2.0])))
     assert np.isnan(median(np.empty(0)))
     assert mad_sigma(np.empty(0)) == 0.0
+    assert np.isnan(mad_sigma(np.array([1.0, np.nan, 2.0])))
+    assert np.isnan(percentile(np.array([1.0, np.nan, 2.0]), 25.0))
+    assert np.isnan(percentile(np.empty(0), 25.0))
 
 
 def test_mad_sigma_is_the_gaussian_std_and_survives_digitisation():

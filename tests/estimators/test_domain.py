@@ -206,6 +206,22 @@ def test_embedding_reference_flags_lines_far_from_its_reference(tmp_path):
     assert np.allclose(back.distance(new[:, :50]), ref.distance(new[:, :50]), rtol=1e-5)
 
 
+def test_embedding_distance_is_the_projection_and_residual_it_documents():
+    rng = np.random.default_rng(3)
+    # fewer lines than features: a residual outside the components
+    ref = EmbeddingReference.fit(rng.standard_normal((2, 30, 40)) * np.linspace(2, 0.1, 40),
+                                 "abc")  # fmt: skip
+    f = rng.standard_normal((2, 100, 40))
+    d2 = np.zeros((2, 100))
+    for m in range(2):
+        X = f[m] - ref.mean[m]
+        P = X @ ref.components[m].T
+        d2[m] = (P**2 / ref.variance[m]).sum(1) + ((X**2).sum(1) - (P**2).sum(1)) \
+            / ref.residual_variance[m]
+    expected = np.sqrt(d2 / 40).mean(axis=0) / ref.limit
+    np.testing.assert_allclose(ref.distance(f), expected, rtol=1e-5)
+
+
 def examples() -> list[Trace]:
     folder = resources.files("stickslip") / "resources" / "examples"
     manifest = {m["file"]: m for m in json.loads((folder / "manifest.json").read_text())}

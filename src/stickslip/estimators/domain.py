@@ -15,7 +15,7 @@ Every estimator's :meth:`~stickslip.estimators.base.TraceEstimator.predict` ends
     by ``"; "`` (``"no estimate: <quality>"`` for rows without an estimate).
 
 The checks. The first four read the trace itself (:func:`trace_checks`, a compiled
-kernel: about 40 us per 512-pixel line, chunks of lines on numba's threads) and the
+kernel: about 12 us per 512-pixel line on one core, chunks of lines on numba's threads) and the
 row's estimate, so they hold for every estimator:
 
 1. slips: at least :data:`MIN_SLIPS` sudden drops (a run of pixel differences below
@@ -76,7 +76,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, MutableMapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +86,7 @@ from numba import njit
 
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
-from stickslip.robust import mad_sigma, median, select
+from stickslip.robust import mad_sigma, median, percentile, select_tails
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
 ETA_WINDOW = (1.2, 40.0)
@@ -143,24 +143,37 @@ def _events(d: np.ndarray, sign: float, thr: float, min_size: float, pos: np.nda
 
 @njit(cache=True, error_model="numpy")
 def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
+    # one loop per quantity where numpy expressions would allocate a temporary each:
+    # the same sums in the same order, so the same values
     n = F.size
     out[:] = np.nan
     G = F.copy()  # 3-point median: a single-sample spike is not a slip
     for i in range(1, n - 1):
         a, b, c = F[i - 1], F[i], F[i + 1]
         G[i] = max(min(a, b), min(max(a, b), c))
-    sigma = mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
+    d2 = np.empty(max(n - 2, 0))
+    for i in range(n - 2):
+        d2[i] = F[i + 2] - 2.0 * F[i + 1] + F[i]
+    sigma = mad_sigma(d2) / np.sqrt(6.0)
     xm, Gm = np.mean(x), np.mean(G)
-    sxx = np.sum((x - xm) ** 2)
-    slope = np.sum((x - xm) * (G - Gm)) / sxx if sxx > 0 else 0.0
-    # the 2 % and 98 % order statistics by selection (a full sort costs twice as much)
+    sxx, sxy = 0.0, 0.0
+    for i in range(n):
+        u = x[i] - xm
+        sxx += u * u
+        sxy += u * (G[i] - Gm)
+    slope = sxy / sxx if sxx > 0 else 0.0
+    # the 2 % and 98 % order statistics, both tails in one pass (select_tails)
     hi, lo = int(0.98 * (n - 1)), int(0.02 * (n - 1))
     span = 0.0
     if hi > lo:
-        resid = G - slope * (x - xm)
-        span = select(resid, hi) - select(resid, lo)
-    d = G[1:] - G[:-1]
-    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * median(np.abs(d)), 1e-12)
+        bottom, top = select_tails(G - slope * (x - xm), lo, hi)
+        span = top - bottom
+    d = np.empty(max(n - 1, 0))
+    ad = np.empty_like(d)
+    for i in range(n - 1):
+        d[i] = G[i + 1] - G[i]
+        ad[i] = abs(d[i])
+    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * median(ad), 1e-12)
     min_size = max(0.25 * span, 6.0 * sigma, 1e-12)
     pos = np.empty(d.size, np.int64)
     nd = _events(d, -1.0, thr, min_size, pos)
@@ -170,7 +183,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         for k in range(nd - 1):
             gaps[k] = x[pos[k + 1] + 1] - x[pos[k] + 1]
         out[SPACING_MEDIAN] = median(gaps)
-        out[SPACING_Q25] = np.percentile(gaps, 25.0)
+        out[SPACING_Q25] = percentile(gaps, 25.0)
     out[N_RISES] = _events(d, 1.0, thr, min_size, pos)
     out[NOISE] = sigma
     out[SPAN] = span
@@ -494,6 +507,8 @@ class EmbeddingReference:
     limit: float
     level: float
     fingerprint: str
+    #: per member, ``L`` with ``L L^T`` the precision the distance reads (made on first use)
+    _whitener: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def fit(cls, features: np.ndarray, fingerprint: str, shrinkage: float = 0.01,
@@ -522,16 +537,35 @@ class EmbeddingReference:
         self.limit = float(np.quantile(self.raw_distance(features), level))
         self.level = float(level)
 
+    def whitener(self) -> np.ndarray:
+        """Per member a (D, D) matrix ``L`` with ``d^2 = |(f - mean) L|^2``, float32.
+
+        ``L`` is the Cholesky factor of the precision ``C^T diag(1/var - 1/var_res) C +
+        I / var_res`` (``C`` the components, orthonormal rows), which is the class's
+        ``d^2``: one matrix product per member instead of a projection and a residual
+        (whose difference of squares also loses digits).
+        """
+        if self._whitener is None:
+            M, k, D = self.components.shape
+            L = np.empty((M, D, D), np.float32)
+            for m in range(M):
+                C, r = self.components[m], self.residual_variance[m]
+                W = (C.T * (1.0 / self.variance[m] - 1.0 / r)) @ C + np.eye(D) / r
+                L[m] = np.linalg.cholesky(0.5 * (W + W.T))
+            self._whitener = L
+        return self._whitener
+
     def raw_distance(self, features: np.ndarray) -> np.ndarray:
-        """Distance (mean over members) of N lines' features (M, N, D), not scaled."""
-        feats = np.asarray(features, float)
-        d2 = np.zeros(feats.shape[:2])
-        for m in range(feats.shape[0]):  # one member at a time: (N, D) @ (D, k)
-            X = feats[m] - self.mean[m]
-            P = X @ self.components[m].T
-            rest = np.einsum("nd,nd->n", X, X) - np.einsum("nk,nk->n", P, P)
-            d2[m] = (P**2 / self.variance[m]).sum(axis=1) + np.maximum(rest, 0.0) \
-                / self.residual_variance[m]
+        """Distance (mean over members) of N lines' features (M, N, D), not scaled.
+
+        Computed in float32 (the features' precision; relative error ~1e-6)."""
+        feats = np.asarray(features, np.float32)
+        L = self.whitener()
+        mean = self.mean.astype(np.float32)
+        d2 = np.empty(feats.shape[:2])
+        for m in range(feats.shape[0]):  # one member at a time: (N, D) @ (D, D)
+            Y = (feats[m] - mean[m]) @ L[m]
+            d2[m] = np.einsum("nd,nd->n", Y, Y)
         return np.sqrt(d2 / feats.shape[-1]).mean(axis=0)
 
     def distance(self, features: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from stickslip.robust import mad_sigma, median
+from stickslip.robust import mad_sigma, median, percentile
 
 MIN_FIT_SAMPLES = 3  # straight line
 MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
@@ -152,12 +152,10 @@ def _despike(F: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _window_diff(G: np.ndarray, w: int) -> np.ndarray:
-    """``D[i] = mean(G[i+1..i+w]) - mean(G[i-w+1..i])``; NaN where undefined."""
-    n = G.size
-    C = np.zeros(n + 1)
-    for i in range(n):
-        C[i + 1] = C[i] + G[i]
+def _window_diff(C: np.ndarray, w: int) -> np.ndarray:
+    """``D[i] = mean(G[i+1..i+w]) - mean(G[i-w+1..i])`` from ``C = _cumsum0(G)``; NaN
+    where undefined."""
+    n = C.size - 1
     D = np.full(n, np.nan)
     for i in range(w - 1, n - w):
         D[i] = ((C[i + w + 1] - C[i + 1]) - (C[i + 1] - C[i - w + 1])) / w
@@ -199,7 +197,7 @@ def _force_range(x: np.ndarray, F: np.ndarray) -> float:
     sxx = np.sum((x - xm) ** 2)
     b = np.sum((x - xm) * (F - Fm)) / sxx if sxx > 0 else 0.0
     r = F - b * (x - xm)
-    return np.percentile(r, 95.0) - np.percentile(r, 5.0) if n > 1 else 0.0
+    return percentile(r, 95.0) - percentile(r, 5.0) if n > 1 else 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -224,7 +222,7 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
     lines); 0: white noise only.
     """
     n = G.size
-    D = _window_diff(G, w)
+    D = _window_diff(C, w)
     Dv = D[w - 1 : n - w]
     floor = RISE_FACTOR * median(np.abs(Dv)) if Dv.size > 0 else 0.0
     noise_w = sigma * np.sqrt(2.0 / w)
@@ -247,8 +245,8 @@ def _schmitt_on(r: np.ndarray, out: np.ndarray) -> int:
     n = r.size
     if n < 4:
         return 0
-    lo = np.percentile(r, 25.0)
-    hi = np.percentile(r, 75.0)
+    lo = percentile(r, 25.0)
+    hi = percentile(r, 75.0)
     high = r[0] >= hi
     last_high = 0
     k = 0
@@ -450,7 +448,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
         counts[ns] = _scale_events(G, C, w, sigma, w_noise, buf)
         k = counts[ns]
         # the larger slips, not all (a multiple-slip trace mixes sizes), span the range
-        deep[ns] = k > 0 and np.percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
+        deep[ns] = k > 0 and percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
         if ns > 0 and deep[ns - 1] and _stable(counts[ns - 1], k):
             if best < 0 or counts[ns - 1] > counts[best]:
                 best = ns - 1
