@@ -86,19 +86,30 @@ def _clipped_sigma(d2: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def noise_sigma(F: np.ndarray) -> float:
+def white_sigma(F: np.ndarray) -> float:
+    """Robust std of white noise from all second differences (sticks' bends and slips
+    included): ``mad_sigma(d2) / sqrt(6)``, 0 below 3 samples."""
+    if F.size < 3:
+        return 0.0
+    return mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
+
+
+@njit(cache=True, error_model="numpy")
+def noise_sigma(F: np.ndarray, s_all: float = -1.0) -> float:
     """White-noise standard deviation per sample from second differences (robust).
 
     With a few samples per slip, most second differences touch a slip and no robust
     statistic of all of them is noise. The samples around the steepest drops (steps
     below ``-RISE_FACTOR median|dF|``, slips or not) are then left out: if what remains
     is clearly quieter (``STICK_NOISE_RATIO``), slips inflated the first figure.
+    ``s_all``: :func:`white_sigma` of ``F`` where the caller has it (negative: computed).
     """
     n = F.size
     if n < 3:
         return 0.0
     d2 = F[2:] - 2.0 * F[1:-1] + F[:-2]
-    s_all = mad_sigma(d2) / np.sqrt(6.0)
+    if s_all < 0:
+        s_all = white_sigma(F)
     d1 = F[1:] - F[:-1]
     cut = -RISE_FACTOR * median(np.abs(d1))
     if not cut < 0:  # coarse digitisation: most steps are zero, nothing stands out
@@ -210,8 +221,21 @@ def _cumsum0(G: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def _scale_noise_memo(C: np.ndarray, w: int, memo: np.ndarray) -> float:
+    """:func:`_scale_noise` at a power-of-two ``w``, computed once per line: ``memo[j]``
+    holds it for ``w = 2**j`` (NaN until computed). Every coarser detection scale reads
+    the noise at the same block size, ``w_noise``."""
+    j = 0
+    while (1 << j) < w:
+        j += 1
+    if np.isnan(memo[j]):
+        memo[j] = _scale_noise(C, w)
+    return memo[j]
+
+
+@njit(cache=True, error_model="numpy")
 def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: int,
-                  buf: np.ndarray) -> int:  # fmt: skip
+                  buf: np.ndarray, memo: np.ndarray) -> int:  # fmt: skip
     """Drops of ``D_w`` below ``-max(noise, RISE_FACTOR median|D_w|)`` into ``buf``.
 
     Correlated noise (1/f, filtered, interpolated) is larger at scale ``w`` than white
@@ -219,7 +243,7 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
     a stick-slip cycle, whose second differences are mostly noise), and extrapolated as
     white beyond (blocks of a quarter cycle are all signal: measured there, the "noise"
     would be the sawtooth itself); ``w_noise = -1``: on ``w``-blocks (finely sampled
-    lines); 0: white noise only.
+    lines); 0: white noise only. ``memo``: :func:`_scale_noise_memo`'s, one per line.
     """
     n = G.size
     D = _window_diff(C, w)
@@ -228,9 +252,9 @@ def _scale_events(G: np.ndarray, C: np.ndarray, w: int, sigma: float, w_noise: i
     noise_w = sigma * np.sqrt(2.0 / w)
     if w_noise >= 1:
         wm = min(w, w_noise)
-        noise_w = max(noise_w, _scale_noise(C, wm) * np.sqrt(wm / w))
+        noise_w = max(noise_w, _scale_noise_memo(C, wm, memo) * np.sqrt(wm / w))
     elif w_noise < 0:  # every block size measures the noise
-        noise_w = max(noise_w, _scale_noise(C, w))
+        noise_w = max(noise_w, _scale_noise_memo(C, w, memo))
     return _events(D, max(NOISE_SIGMAS * noise_w, floor), buf)
 
 
@@ -392,8 +416,9 @@ def _stable(a: int, b: int) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, float]:
-    """Find slip events.
+def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
+                 ) -> tuple[np.ndarray, int, float, float]:  # fmt: skip
+    """Find slip events (``s_all``: :func:`white_sigma` of ``F`` if the caller has it).
 
     Returns
     -------
@@ -416,17 +441,18 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     """
     n = F.size
     G = _despike(F)
-    sigma = noise_sigma(F)
+    sigma = noise_sigma(F, s_all)
     span = _force_range(x, G)
     C = _cumsum0(G)
     buf = np.empty((n, 4))
+    memo = np.full(64, np.nan)
     # blocks of up to 1/BLOCKS_PER_CYCLE of a cycle measure the noise (``_scale_events``)
     w_noise = 0
     # cycles: the Schmitt trigger's count, or the drops at the two finest scales above
     # white noise where drift or a modulated barrier hide cycles from it
     nc = _cycles(x, G)
     for w in (1, 2):
-        nc = max(nc, _scale_events(G, C, w, sigma, 0, buf))
+        nc = max(nc, _scale_events(G, C, w, sigma, 0, buf, memo))
     cyc = n / max(nc, 1)
     if cyc >= FINE_CYCLE:
         # finely sampled: blocks at every window size stay far below a cycle, and their
@@ -445,7 +471,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
     best = -1
     while w <= max(1, n // 32) and ns < 64:
         ws[ns] = w
-        counts[ns] = _scale_events(G, C, w, sigma, w_noise, buf)
+        counts[ns] = _scale_events(G, C, w, sigma, w_noise, buf, memo)
         k = counts[ns]
         # the larger slips, not all (a multiple-slip trace mixes sizes), span the range
         deep[ns] = k > 0 and percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
@@ -461,7 +487,7 @@ def detect_slips(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, 
             if deep[j]:
                 best = j
                 break
-    k = _scale_events(G, C, ws[best], sigma, w_noise, buf) if best >= 0 else 0
+    k = _scale_events(G, C, ws[best], sigma, w_noise, buf, memo) if best >= 0 else 0
     if cyc < COARSE_CYCLE and 2 * k < nc:
         # a few samples per cycle and most cycles without a slip: the noise estimate
         # read the sticks' bends as noise, or slips split over pixels hid below it.
@@ -659,10 +685,10 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
         Noise per sample (:func:`noise_sigma`).
     """
     n = F.size
-    events, w, sigma, _ = detect_slips(x, F)
     # the fits' tolerance (outlier cut, bend test) is the scatter of all second
     # differences, sharp corners of the branch included, not the sticks' noise alone
-    tol = mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0) if n >= 3 else 0.0
+    tol = white_sigma(F)
+    events, w, sigma, _ = detect_slips(x, F, tol)
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
     slips = np.full((ne, N_SLIP_COLS), np.nan)
