@@ -45,6 +45,10 @@ FINE_CYCLE = 128  # ... on lines of fewer samples per cycle; finer ones on every
 COARSE_CYCLE = 16  # lines of fewer samples per cycle may take their slips from the cycles
 COARSE_DROP_SIGMAS = 5.0  # ... if the drops stand this far above the sticks' noise
 COARSE_ASYMMETRY = 1.4  # ... and the steepest fall beats the stick's steepest rise so
+SPLIT_HALF = 3  # samples each side of the step statistic that looks for missed slips
+SPLIT_SIGMAS = 5.0  # ... a missed slip's detrended step, in units of its noise
+SPLIT_RAW_SIGMAS = 3.0  # ... and its raw (not detrended) fall: a flat top has none
+SPLIT_DROP_FRACTION = 0.3  # ... and at least this fraction of the found slips' step
 
 # columns of the per-segment table returned by `analyse_segments`
 SEG_START, SEG_END, SEG_SLOPE, SEG_F_LO, SEG_F_HI, SEG_NFIT = 0, 1, 2, 3, 4, 5
@@ -508,6 +512,87 @@ def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
 
 
 @njit(cache=True, error_model="numpy")
+def _split_sticks(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np.ndarray:
+    """Slips that the detection missed inside the stick segments of a coarse line.
+
+    With a few samples per slip, a slip split over two pixels makes two steps that
+    need not stand out of ``D_w``'s noise, and a multiple-slip line mixes slips of one
+    and two lattice spacings: the detection may keep the large ones only, and a missed
+    slip merges two sticks into one, whose slope is then far too low. Inside each
+    segment the step ``S(i) = mean(F[i+2..i+m+1]) - mean(F[i-m+1..i]) - s (m + 1)``
+    (``m = SPLIT_HALF``; pixel ``i + 1`` may hold the slip; ``s`` the sticks' rise per
+    sample, the median first difference away from the slips) has the noise
+    ``sigma sqrt(2/m)`` and sees a whole slip however the pixels split it. A missed
+    slip must fall by ``SPLIT_SIGMAS`` of that noise after detrending, by
+    ``SPLIT_RAW_SIGMAS`` before (a stick that bends over to a flat top falls only
+    after detrending) and by ``SPLIT_DROP_FRACTION`` of the found slips' median step.
+    Returns the events with the new ones (rows as :func:`detect_slips`), sorted.
+    """
+    n = F.size
+    ne = events.shape[0]
+    m = SPLIT_HALF
+    if ne < 2 or not sigma > 0 or n < 4 * m:
+        return events
+    d = F[1:] - F[:-1]
+    away = np.ones(n - 1, dtype=np.bool_)
+    for k in range(ne):
+        away[max(int(events[k, 0]) - w, 0) : min(int(events[k, 1]) + w + 1, n - 1)] = False
+    if away.sum() < 8:
+        return events
+    s = median(d[away])
+    if not s > 0:
+        return events
+    C = _cumsum0(F)
+    S = np.full(n, np.nan)
+    for i in range(m - 1, n - m - 1):
+        S[i] = (C[i + m + 2] - C[i + 2] - C[i + 1] + C[i - m + 1]) / m - s * (m + 1)
+    # the found slips' step (the pixel split decides which of two positions sees it)
+    hd = np.empty(ne)
+    for k in range(ne):
+        c = int(events[k, 2])
+        hd[k] = np.nan
+        for i in (c - 1, c):
+            if 0 <= i < n and not np.isnan(S[i]) and not (S[i] >= hd[k]):
+                hd[k] = S[i]
+    hv = hd[~np.isnan(hd)]
+    if hv.size < 2:
+        return events
+    se = sigma * np.sqrt(2.0 / m)
+    thr = max(SPLIT_SIGMAS * se, -SPLIT_DROP_FRACTION * median(hv))
+    extra = np.empty((n, 4))
+    nx = 0
+    start = 0
+    for k in range(ne + 1):
+        end = int(events[k, 0]) - (w - 1) - 1 if k < ne else n - 1
+        lo, hi = start + 1, end - 1  # one guard sample each side, as the stick fits
+        free = np.zeros(n, dtype=np.bool_)
+        for i in range(lo + m - 1, hi - m):
+            free[i] = not np.isnan(S[i])
+        while True:
+            best = -1
+            for i in range(lo, hi + 1):
+                if free[i] and (best < 0 or S[i] < S[best]):
+                    best = i
+            if best < 0 or not (S[best] < -thr and S[best] + s * (m + 1) < -SPLIT_RAW_SIGMAS * se):
+                break
+            i = best
+            extra[nx, 0] = i + 1
+            extra[nx, 1] = i + 1
+            extra[nx, 2] = i if d[i] < d[i + 1] else i + 1
+            extra[nx, 3] = -S[i]
+            nx += 1
+            free[max(i - m - 1, 0) : min(i + m + 2, n)] = False
+        if k < ne:
+            start = int(events[k, 1]) + w + max(0, int(events[k, 1] - events[k, 0]) + 1 - w)
+    if nx == 0:
+        return events
+    out = np.empty((ne + nx, 4))
+    out[:ne] = events
+    out[ne:] = extra[:nx]
+    return out[np.argsort(out[:, 0])]
+
+
+@njit(cache=True, error_model="numpy")
 def _polyfit(x: np.ndarray, F: np.ndarray, lo: int, hi: int, xref: float, deg: int,
              mask: np.ndarray) -> tuple[float, float, float]:  # fmt: skip
     """Least-squares polynomial (degree 1 or 2) on samples lo..hi (inclusive) with mask."""
@@ -668,27 +753,21 @@ def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray
 
 
 @njit(cache=True, error_model="numpy")
-def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
-    """Detect slips and fit the stick segments between them.
+def split_events(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np.ndarray:
+    """The events with the slips the detection missed inside the sticks of a coarse line
+    (fewer than ``FINE_CYCLE`` samples per slip found; :func:`_split_sticks`); the same
+    rows where it finds none or the line is finely sampled."""
+    if F.size < FINE_CYCLE * (events.shape[0] + 1):
+        return _split_sticks(F, events, w, sigma)
+    return events
 
-    Returns
-    -------
-    segs : ndarray (n_slips + 1, N_SEG_COLS)
-        Per stick segment: fit range, rising-part slope and its end values, quadratic
-        coefficients, peak; NaN where the segment is too short.
-    slips : ndarray (n_slips, N_SLIP_COLS)
-        Per slip: position, force just before and after, peak of the preceding stick,
-        index of the slip centre. NaN where a neighbouring segment could not be fitted.
-    w : int
-        Detection window in samples.
-    sigma : float
-        Noise per sample (:func:`noise_sigma`).
-    """
+
+@njit(cache=True, error_model="numpy")
+def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: float
+                 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The stick fits between given slip events (:func:`analyse_segments`' tables);
+    ``tol``: the fits' outlier and bend tolerance (:func:`white_sigma`)."""
     n = F.size
-    # the fits' tolerance (outlier cut, bend test) is the scatter of all second
-    # differences, sharp corners of the branch included, not the sticks' noise alone
-    tol = white_sigma(F)
-    events, w, sigma, _ = detect_slips(x, F, tol)
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
     slips = np.full((ne, N_SLIP_COLS), np.nan)
@@ -715,6 +794,35 @@ def analyse_segments(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarr
         if int(post[SEG_START]) <= int(pre[SEG_END]):
             continue
         _locate_slip(x, F, pre, post, tol, slips[k])
+    return segs, slips
+
+
+@njit(cache=True, error_model="numpy")
+def analyse_segments(x: np.ndarray, F: np.ndarray, split: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray, int, float]:  # fmt: skip
+    """Detect slips and fit the stick segments between them (``split``: and split the
+    sticks of a coarse line at the slips the detection missed, :func:`split_events`).
+
+    Returns
+    -------
+    segs : ndarray (n_slips + 1, N_SEG_COLS)
+        Per stick segment: fit range, rising-part slope and its end values, quadratic
+        coefficients, peak; NaN where the segment is too short.
+    slips : ndarray (n_slips, N_SLIP_COLS)
+        Per slip: position, force just before and after, peak of the preceding stick,
+        index of the slip centre. NaN where a neighbouring segment could not be fitted.
+    w : int
+        Detection window in samples.
+    sigma : float
+        Noise per sample (:func:`noise_sigma`).
+    """
+    # the fits' tolerance (outlier cut, bend test) is the scatter of all second
+    # differences, sharp corners of the branch included, not the sticks' noise alone
+    tol = white_sigma(F)
+    events, w, sigma, _ = detect_slips(x, F, tol)
+    if split:
+        events = split_events(F, events, w, sigma)
+    segs, slips = fit_segments(x, F, events, w, tol)
     return segs, slips, w, sigma
 
 
