@@ -83,6 +83,7 @@ from typing import Any
 import numba
 import numpy as np
 from numba import njit
+from threadpoolctl import ThreadpoolController
 
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
@@ -468,6 +469,17 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
         widen_rows([row for row in done if not row["in_domain"]])
 
 
+_CONTROLLER: list[ThreadpoolController] = []
+
+
+def _blas_controller() -> ThreadpoolController:
+    """The process's thread-pool controller, made on first use (it lists the BLAS
+    libraries loaded by then: numpy's, and torch's once a model has run)."""
+    if not _CONTROLLER:
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0]
+
+
 @dataclass
 class EmbeddingReference:
     """Where a learned model's pooled features lie on its training-like lines.
@@ -563,9 +575,13 @@ class EmbeddingReference:
         L = self.whitener()
         mean = self.mean.astype(np.float32)
         d2 = np.empty(feats.shape[:2])
-        for m in range(feats.shape[0]):  # one member at a time: (N, D) @ (D, D)
-            Y = (feats[m] - mean[m]) @ L[m]
-            d2[m] = np.einsum("nd,nd->n", Y, Y)
+        # on one BLAS thread: after a threaded product OpenBLAS's threads spin for a
+        # while, and the verdict's compiled checks that follow on numba's threads ran
+        # up to 1.7x slower beside them (about 20 ms per 5,000 lines)
+        with _blas_controller().limit(limits=1, user_api="blas"):
+            for m in range(feats.shape[0]):  # one member at a time: (N, D) @ (D, D)
+                Y = (feats[m] - mean[m]) @ L[m]
+                d2[m] = np.einsum("nd,nd->n", Y, Y)
         return np.sqrt(d2 / feats.shape[-1]).mean(axis=0)
 
     def distance(self, features: np.ndarray) -> np.ndarray:
