@@ -342,3 +342,10 @@ def test_the_line_model_keeps_example_traces_in_domain_and_reversed_ones_out():
     emb = np.array([r["domain_embedding"] for r in table.rows])
     assert np.mean(emb[n:] > 1.0) >= 0.6, emb[n:]
     assert np.median(emb[n:]) > 2 * np.median(emb[:n]), emb
+
+
+def test_embedding_reason_shows_how_far_past_the_limit():
+    # a line just past the limit must not read as "1x the limit"
+    checks = trace_checks([X], [sawtooth()])
+    text = D.reason("embedding", checks, 0, A, {"domain_embedding": 1.0126})
+    assert "1.01x the limit" in text

@@ -372,7 +372,7 @@ def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
         return (f"eta near the trained window's edge ({eta:.3g} < {ETA_CONFIRM:g}) and the "
                 f"slips do not invert to stick-slip (classical: {row['stick_slip_check']})")
     emb = _number(row, "domain_embedding")
-    return f"line unlike the training lines (embedding distance {emb:.2g}x the limit)"
+    return f"line unlike the training lines (embedding distance {emb:.3g}x the limit)"
 
 
 def widen_row(row: MutableMapping[str, Any], factor: float = WIDEN_FACTOR) -> None:
