@@ -562,10 +562,12 @@ def _split_sticks(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np
     extra = np.empty((n, 4))
     nx = 0
     start = 0
+    # candidates of the current stick (all False between sticks: one array for the line,
+    # not one per stick, which would cost samples x slips on a long coarse line)
+    free = np.zeros(n, dtype=np.bool_)
     for k in range(ne + 1):
         end = int(events[k, 0]) - (w - 1) - 1 if k < ne else n - 1
         lo, hi = start + 1, end - 1  # one guard sample each side, as the stick fits
-        free = np.zeros(n, dtype=np.bool_)
         for i in range(lo + m - 1, hi - m):
             free[i] = not np.isnan(S[i])
         while True:
@@ -582,6 +584,8 @@ def _split_sticks(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np
             extra[nx, 3] = -S[i]
             nx += 1
             free[max(i - m - 1, 0) : min(i + m + 2, n)] = False
+        if hi >= lo:
+            free[lo : hi + 1] = False
         if k < ne:
             start = int(events[k, 1]) + w + max(0, int(events[k, 1] - events[k, 0]) + 1 - w)
     if nx == 0:
