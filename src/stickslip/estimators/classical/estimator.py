@@ -2,7 +2,10 @@
 
 The experimentalists' automated algorithm, made robust and physics-consistent:
 
-1. slips and stick segments (:mod:`stickslip.estimators.classical.slips`);
+1. slips and stick segments (:mod:`stickslip.estimators.classical.slips`); on a
+   coarse line that is answered, sticks split at the slips the detection missed
+   (:func:`~stickslip.estimators.classical.slips.split_events`) where that gives an
+   answer with more slips and eta >= 3 (``refine``);
 2. per segment a robust straight-line fit of the rising branch (``k_exp`` is the median
    over segments) and per slip the peak force, free of pixel averaging;
 3. ``F_max`` and ``K`` from the mean peak and the slopes, inverting the PT relations

@@ -19,6 +19,12 @@ slip position inside its pixel follows from pixel averaging: the force integral 
 the pixels between two segments must equal that of the pre-slip branch up to the slip
 and the post-slip branch after it. That gives the force just before (``F_slip``) and
 after (``F_after``) each slip free of the pixel-averaging bias.
+
+On a coarse line (fewer than ``FINE_CYCLE`` samples per slip found), a slip averaged
+over two pixels may stay below ``D_w``'s threshold, and two sticks then merge into one.
+:func:`split_events` looks inside each stick for such a slip with a step statistic that
+sees the whole fall however the pixels split it (the estimator uses it to refine lines
+it answers).
 """
 
 from __future__ import annotations
