@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from stickslip.robust import mad_sigma, median, percentile, select, select_tails
+from stickslip.robust import mad_sigma, median, percentile, select, select_tails, white_sigma
 
 
 def _cases():
@@ -62,3 +62,12 @@ def test_mad_sigma_is_the_gaussian_std_and_survives_digitisation():
     d = np.r_[np.zeros(600), rng.normal(0.0, 1.0, 400)]
     assert mad_sigma(d) > 0.0
     assert mad_sigma(d) == pytest.approx(1.2533 * np.mean(np.abs(d - np.median(d))))
+
+
+def test_white_sigma_is_the_noise_of_a_line_from_its_second_differences():
+    rng = np.random.default_rng(8)
+    x = np.linspace(0.0, 10.0, 20_000)
+    F = 3.0 * x + rng.normal(0.0, 0.5, x.size)  # a straight rise has no second difference
+    assert white_sigma(F) == pytest.approx(0.5, rel=0.02)
+    assert white_sigma(F) == mad_sigma(np.diff(F, 2)) / np.sqrt(6.0)
+    assert white_sigma(F[:2]) == 0.0

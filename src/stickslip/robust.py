@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["mad_sigma", "median", "percentile", "select", "select_tails"]
+__all__ = ["mad_sigma", "median", "percentile", "select", "select_tails", "white_sigma"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -179,3 +179,19 @@ def percentile(v: np.ndarray, q: float) -> float:
     lower = _select_inplace(a, k)
     upper = np.min(a[k + 1 :])  # the next order statistic
     return lower * (1 - m) + upper * m
+
+
+@njit(cache=True, error_model="numpy")
+def white_sigma(F: np.ndarray) -> float:
+    """Robust standard deviation of white noise on a line from all its second
+    differences (whose std is ``sqrt(6)`` times the noise's): ``mad_sigma(d2) /
+    sqrt(6)``, 0 below 3 samples. Slips and the sticks' bends count in: this is the
+    plain estimate (the compiled twin of :func:`stickslip.estimators.noise.noise_nN` at
+    ``iterations=0``, with the MAD in place of the median absolute value)."""
+    n = F.size
+    if n < 3:
+        return 0.0
+    d2 = np.empty(n - 2)
+    for i in range(n - 2):
+        d2[i] = F[i + 2] - 2.0 * F[i + 1] + F[i]
+    return mad_sigma(d2) / np.sqrt(6.0)

@@ -87,7 +87,7 @@ from threadpoolctl import ThreadpoolController
 
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
-from stickslip.robust import mad_sigma, median, percentile, select_tails
+from stickslip.robust import median, percentile, select_tails, white_sigma
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
 ETA_WINDOW = (1.2, 40.0)
@@ -152,10 +152,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     for i in range(1, n - 1):
         a, b, c = F[i - 1], F[i], F[i + 1]
         G[i] = max(min(a, b), min(max(a, b), c))
-    d2 = np.empty(max(n - 2, 0))
-    for i in range(n - 2):
-        d2[i] = F[i + 2] - 2.0 * F[i + 1] + F[i]
-    sigma = mad_sigma(d2) / np.sqrt(6.0)
+    sigma = white_sigma(F)
     xm, Gm = np.mean(x), np.mean(G)
     sxx, sxy = 0.0, 0.0
     for i in range(n):

@@ -4,8 +4,8 @@ Second differences of white noise of standard deviation ``sigma`` have standard
 deviation ``sqrt(6) sigma``, and the median of their absolute value is ``0.6745`` of
 that. Slips make a quarter or more of them large, so :func:`noise_nN` can iterate:
 values beyond 3.5 standard deviations are dropped and the median recomputed.
-(The classical estimator's compiled kernel has its own copy of the plain estimate,
-inside numba code, in :mod:`stickslip.estimators.classical.slips`.)
+(The compiled kernels, the slip detector and the verdict's trace checks, use the
+plain estimate's numba twin, :func:`stickslip.robust.white_sigma`.)
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from stickslip.robust import mad_sigma, median, percentile
+from stickslip.robust import mad_sigma, median, percentile, white_sigma
 
 MIN_FIT_SAMPLES = 3  # straight line
 MIN_QUAD_SAMPLES = 8  # quadratic (end values and peak)
@@ -93,15 +93,6 @@ def _clipped_sigma(d2: np.ndarray) -> float:
             break
         s = s_kept
     return s / np.sqrt(6.0)
-
-
-@njit(cache=True, error_model="numpy")
-def white_sigma(F: np.ndarray) -> float:
-    """Robust std of white noise from all second differences (sticks' bends and slips
-    included): ``mad_sigma(d2) / sqrt(6)``, 0 below 3 samples."""
-    if F.size < 3:
-        return 0.0
-    return mad_sigma(F[2:] - 2.0 * F[1:-1] + F[:-2]) / np.sqrt(6.0)
 
 
 @njit(cache=True, error_model="numpy")
