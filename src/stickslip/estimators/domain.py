@@ -73,6 +73,7 @@ the deeper, slower test of whether the PT model describes a trace at all.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Mapping, MutableMapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -466,15 +467,11 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
         widen_rows([row for row in done if not row["in_domain"]])
 
 
-_CONTROLLER: list[ThreadpoolController] = []
-
-
+@functools.cache
 def _blas_controller() -> ThreadpoolController:
     """The process's thread-pool controller, made on first use (it lists the BLAS
     libraries loaded by then: numpy's, and torch's once a model has run)."""
-    if not _CONTROLLER:
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0]
+    return ThreadpoolController()
 
 
 @dataclass
