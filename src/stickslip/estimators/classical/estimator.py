@@ -36,7 +36,7 @@ import stickslip.estimators.classical.slips as sl
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
-from stickslip.robust import mad_sigma, median, white_sigma
+from stickslip.robust import mad_sigma, median
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
@@ -93,8 +93,7 @@ def _spread(v: np.ndarray) -> float:
 @njit(cache=True, error_model="numpy")
 def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
                   mass_kg: float, gamma: float, refine: bool, out: np.ndarray) -> None:  # fmt: skip
-    tol = white_sigma(F)
-    events, w, sigma, _ = sl.detect_slips(x, F, tol)
+    events, w, sigma, tol = sl.detect_for_fits(x, F)
     segs, slp = sl.fit_segments(x, F, events, w, tol)
     _estimate_core(x, F, segs, slp, w, sigma, a, T, v, mass_kg, gamma, out)
     if not refine or out[STATUS] != 0:

@@ -767,7 +767,7 @@ def split_events(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np.
 def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: float
                  ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The stick fits between given slip events (:func:`analyse_segments`' tables);
-    ``tol``: the fits' outlier and bend tolerance (:func:`white_sigma`)."""
+    ``tol``: the fits' outlier and bend tolerance (:func:`detect_for_fits`)."""
     n = F.size
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
@@ -799,6 +799,17 @@ def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: 
 
 
 @njit(cache=True, error_model="numpy")
+def detect_for_fits(x: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, float, float]:
+    """:func:`detect_slips`' events, window and noise, and the stick fits' tolerance
+    (:func:`fit_segments`' ``tol``): the scatter of all second differences
+    (:func:`white_sigma`), sharp corners of the branch included, not the sticks' noise
+    alone; computed once for the detection's noise estimate and the fits."""
+    tol = white_sigma(F)
+    events, w, sigma, _ = detect_slips(x, F, tol)
+    return events, w, sigma, tol
+
+
+@njit(cache=True, error_model="numpy")
 def analyse_segments(x: np.ndarray, F: np.ndarray, split: bool = False
                      ) -> tuple[np.ndarray, np.ndarray, int, float]:  # fmt: skip
     """Detect slips and fit the stick segments between them (``split``: and split the
@@ -817,10 +828,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray, split: bool = False
     sigma : float
         Noise per sample (:func:`noise_sigma`).
     """
-    # the fits' tolerance (outlier cut, bend test) is the scatter of all second
-    # differences, sharp corners of the branch included, not the sticks' noise alone
-    tol = white_sigma(F)
-    events, w, sigma, _ = detect_slips(x, F, tol)
+    events, w, sigma, tol = detect_for_fits(x, F)
     if split:
         events = split_events(F, events, w, sigma)
     segs, slips = fit_segments(x, F, events, w, tol)
