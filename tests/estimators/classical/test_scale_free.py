@@ -122,6 +122,20 @@ def test_five_samples_per_slip_with_noise_finds_the_slips(fine):
     assert found >= 3, found
 
 
+@pytest.mark.parametrize(("U0_eV", "K_N_m"), [(1.0, 10.0), (0.6, 12.0), (1.5, 30.0)])
+@pytest.mark.parametrize("seed", [3, 5])
+def test_five_samples_per_slip_gives_K(U0_eV, K_N_m, seed):
+    # eta 5.2, 2.6, 2.6: sticks of 3-4 samples, slips often split over two pixels.
+    # The guards against partly averaged pixels left such sticks too short to fit (the
+    # line refused as "too few slips" or "smooth sliding"); the samples that still rise
+    # along the stick are taken back.
+    r = simulate([U0_eV], [K_N_m], PhysicalSettings(pixels=4096, length_nm=LENGTH_NM), seed=seed)
+    xn, Fn = resample(r.x_nm, r.force_nN[0], 5)
+    est = estimate_trace(xn, degrade(xn, Fn, float(fmax_nN(U0_eV, A)), 0.03, seed=seed))
+    assert est.quality == "ok", est.quality
+    assert est.K_N_m == pytest.approx(K_N_m, rel=0.20)
+
+
 @pytest.mark.parametrize("kind", ["white", "walk", "sine", "square", "reversed sawtooth"])
 @pytest.mark.parametrize("period", [5, 8, 12])
 def test_coarse_lines_that_are_not_stick_slip_give_no_slips(kind, period):

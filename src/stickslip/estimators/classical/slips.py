@@ -764,6 +764,17 @@ def split_events(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np.
 
 
 @njit(cache=True, error_model="numpy")
+def _rising_run(F: np.ndarray, lo: int, hi: int, lo_min: int, hi_max: int) -> tuple[int, int]:
+    """``lo..hi`` grown within ``lo_min..hi_max`` while the samples beside it continue
+    the stick's rise (a partly averaged pixel at a slip breaks it)."""
+    while hi < hi_max and F[hi + 1] > F[hi]:
+        hi += 1
+    while lo > lo_min and F[lo - 1] < F[lo]:
+        lo -= 1
+    return lo, hi
+
+
+@njit(cache=True, error_model="numpy")
 def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: float
                  ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The stick fits between given slip events (:func:`analyse_segments`' tables);
@@ -772,6 +783,7 @@ def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: 
     ne = events.shape[0]
     segs = np.full((ne + 1, N_SEG_COLS), np.nan)
     slips = np.full((ne, N_SLIP_COLS), np.nan)
+    coarse = n < COARSE_CYCLE * (ne + 1)
     # excluded samples around each slip: the run of D_w widened by the window
     start = 0
     for k in range(ne + 1):
@@ -782,6 +794,12 @@ def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: 
         # one guard sample at each end, against partly averaged pixels
         lo = start + 1 if k > 0 else start
         hi = end - 1 if k < ne else end
+        if coarse and hi - lo + 1 < MIN_FIT_SAMPLES and hi >= lo:
+            # a few samples per slip: the guards (and a slip split over two pixels,
+            # which is not a smeared one) leave too little to fit; take back the
+            # samples beside it that still rise along the stick
+            raw_lo = int(events[k - 1, 1]) + w if k > 0 else 0
+            lo, hi = _rising_run(F, lo, hi, raw_lo, end)
         _fit_segment(x, F, lo, hi, tol, 1 if k < ne else 0, segs[k])
         if k < ne:
             # a slip smeared by the detector's bandwidth (a run of D_w longer than the
