@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from stickslip.atomic import write_text_atomic
 from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.families import (
     FamilyCalibration,
@@ -277,8 +278,11 @@ def main() -> None:
             r = score(LineEstimator(ens, source), sets[f"with {f}"])
             summary["lofo"][f] = r
             print(line(f"with {f}", r), flush=True)
-    (args.work / "summary.json").write_text(json.dumps(summary, indent=1))
-    print(f"\nwrote {args.work / 'summary.json'}")
+    # one file per evaluation pool, for benchmarks/coverage_band.py to pool them
+    summary["eval_seed"] = args.eval_seed
+    out = args.work / f"summary_{args.eval_seed}.json"
+    write_text_atomic(out, json.dumps(summary, indent=1))
+    print(f"\nwrote {out}")
     if args.write is not None:
         meta = (line_metadata(args.line_model) if args.line_model
                 else load_bundled(BUNDLED, line_metadata))  # fmt: skip
