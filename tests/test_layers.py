@@ -11,7 +11,7 @@ from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "stickslip"
 # the pipeline, in order: a module may import only its own layer and earlier ones
-LAYERS = ("_version", "units", "robust", "conditions", "atomic", "traces", "simulators",
+LAYERS = ("_version", "units", "robust", "compiled", "conditions", "atomic", "traces", "simulators",
           "estimators", "diagnostics", "jobs", "api", "cli")  # fmt: skip
 
 

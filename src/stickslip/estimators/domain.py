@@ -76,16 +76,15 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Mapping, MutableMapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 from numba import njit
 from threadpoolctl import ThreadpoolController
 
+from stickslip.compiled import chunk_bounds, run_chunks
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
 from stickslip.robust import median, percentile, select_tails, white_sigma
@@ -199,6 +198,8 @@ def _check_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, out: np.nd
 
 #: Lines per thread below which :func:`trace_checks` stays on one thread.
 MIN_LINES_PER_THREAD = 256
+#: The compiled kernels behind :func:`trace_checks` (:func:`stickslip.compiled.cached`).
+KERNELS = (_check_batch,)
 
 
 @dataclass
@@ -243,15 +244,9 @@ def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
     xs = np.concatenate([np.asarray(x, float) for x in x_nm])
     Fs = np.concatenate([np.asarray(f, float) for f in force_nN])
     out = np.empty((n, N_FIELDS))
-    threads = numba.get_num_threads() if threads is None else threads
-    chunks = max(1, min(int(threads), n // MIN_LINES_PER_THREAD))
-    cuts = np.linspace(0, n, chunks + 1).astype(int)
-    parts = [(xs, Fs, offsets[a:b + 1], out[a:b]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-    if chunks == 1:
-        _check_batch(*parts[0])
-    else:
-        with ThreadPoolExecutor(chunks) as pool:
-            list(pool.map(lambda p: _check_batch(*p), parts))
+    cuts = chunk_bounds(n, MIN_LINES_PER_THREAD, threads)
+    run_chunks(_check_batch, [(xs, Fs, offsets[a:b + 1], out[a:b])
+                              for a, b in zip(cuts[:-1], cuts[1:], strict=True)])  # fmt: skip
     return TraceChecks(out[:, N_DROPS].astype(int), out[:, N_RISES].astype(int),
                        out[:, SPACING_MEDIAN], out[:, SPACING_Q25], out[:, NOISE],
                        out[:, SPAN])  # fmt: skip

@@ -21,12 +21,15 @@ from typing import Any
 
 import numpy as np
 
+from stickslip.compiled import cached
 from stickslip.diagnostics.loads import write_load_report
 from stickslip.diagnostics.plots import window_panels
 from stickslip.diagnostics.plots_classical import plot_trace_diagnostics
 from stickslip.diagnostics.ppc import plot_overlay, posterior_predictive_check
 from stickslip.diagnostics.report_html import write_report
+from stickslip.estimators import domain
 from stickslip.estimators.base import Estimator
+from stickslip.estimators.classical import estimator as classical_estimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.slips import analyse_trace
 from stickslip.estimators.pairs import add_pair_columns
@@ -82,6 +85,13 @@ class InferResult:
             lines.append(f"{src}: {n} lines: {reason}" if n > 1 else f"{first[(src, reason)]}: "
                          f"{reason}")  # fmt: skip
         return lines
+
+
+def kernels_cached() -> bool:
+    """Whether the compiled kernels every ``infer`` meets (the verdict's trace checks and
+    the classical estimator) are in numba's on-disk cache already; False on the first
+    run after installing, which compiles them (:mod:`stickslip.compiled`)."""
+    return cached(*domain.KERNELS, *classical_estimator.KERNELS)
 
 
 def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None,

@@ -30,9 +30,10 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 import stickslip.estimators.classical.slips as sl
+from stickslip.compiled import chunk_bounds, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
@@ -227,16 +228,22 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, segs: np.ndarray, slp: np.ndarr
     out[STATUS] = 0
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _estimate_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, a: np.ndarray,
-                    T: np.ndarray, v: np.ndarray, mass_kg: float,
-                    gamma: float, refine: bool) -> np.ndarray:  # fmt: skip
-    n = offsets.size - 1
-    out = np.empty((n, N_FIELDS))
-    for i in prange(n):
+                    T: np.ndarray, v: np.ndarray, mass_kg: float, gamma: float,
+                    refine: bool, out: np.ndarray) -> None:  # fmt: skip
+    # serial and without the GIL: estimate_array runs one chunk of lines per thread
+    # (stickslip.compiled; a parallel loop here took 11 s more to compile)
+    for i in range(offsets.size - 1):
         lo, hi = offsets[i], offsets[i + 1]
         _estimate_one(xs[lo:hi], Fs[lo:hi], a[i], T[i], v[i], mass_kg, gamma, refine, out[i])
-    return out
+
+
+#: Lines per thread below which :func:`estimate_array` stays on one thread (a line
+#: costs about 0.1 ms).
+MIN_LINES_PER_THREAD = 16
+#: The compiled kernels behind :func:`estimate_array` (:func:`stickslip.compiled.cached`).
+KERNELS = (_estimate_batch,)
 
 
 @dataclass
@@ -314,6 +321,7 @@ def estimate_array(
     mass_kg: float = PAPER_MASS_KG,
     damping_per_s: float = PAPER_DAMPING_PER_S,
     refine: bool = True,
+    threads: int | None = None,
 ) -> np.ndarray:
     """Vectorised core: the raw field table (one row per trace) of many traces.
 
@@ -331,6 +339,10 @@ def estimate_array(
         Split the sticks of coarse lines at slips the detection missed
         (:func:`slips.split_events`). It changes the numbers of answered lines only,
         never the ``STATUS`` column: without it, the flags come faster.
+    threads : int, optional
+        Chunks of lines estimated at once, each on its own thread (default: numba's
+        thread count, ``NUMBA_NUM_THREADS``; :data:`MIN_LINES_PER_THREAD` lines each
+        at least).
 
     Returns
     -------
@@ -353,10 +365,14 @@ def estimate_array(
     def per(v: float | np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(np.broadcast_to(np.asarray(v, float), (n,)))
 
-    return _estimate_batch(
-        xcat, Fcat, offsets, per(lattice_nm), per(temperature_K), per(velocity_nm_per_s),
-        float(mass_kg), float(damping_per_s), bool(refine),
-    )  # fmt: skip
+    a, T, v = per(lattice_nm), per(temperature_K), per(velocity_nm_per_s)
+    out = np.empty((n, N_FIELDS))
+    cuts = chunk_bounds(n, MIN_LINES_PER_THREAD, threads)
+    run_chunks(_estimate_batch, [
+        (xcat, Fcat, offsets[i:j + 1], a[i:j], T[i:j], v[i:j], float(mass_kg),
+         float(damping_per_s), bool(refine), out[i:j])
+        for i, j in zip(cuts[:-1], cuts[1:], strict=True)])  # fmt: skip
+    return out
 
 
 def estimate_trace(

@@ -385,7 +385,8 @@ def _coarse_events(x: np.ndarray, G: np.ndarray, local: bool = False
         jump[j] = np.max(d[lo:hi]) if hi > lo else 0.0
         slopes[j] = np.nan
         if hi - lo + 1 >= 3:
-            c0, c1, _ = _polyfit(x, G, lo, hi, x[lo], 1, np.ones(hi - lo + 1, np.bool_))
+            c0, c1, _ = _polyfit(x, G, lo, hi, x[lo], np.int64(1),
+                                 np.ones(hi - lo + 1, np.bool_))  # fmt: skip
             slopes[j] = c1
             ss += np.sum((G[lo : hi + 1] - c0 - c1 * (x[lo : hi + 1] - x[lo])) ** 2)
             dof += hi - lo - 1
@@ -397,7 +398,7 @@ def _coarse_events(x: np.ndarray, G: np.ndarray, local: bool = False
     sigma = np.sqrt(ss / dof)
     run = ev[:, 1] - ev[:, 0] + 1
     good = slopes[~np.isnan(slopes)]
-    drop = median(ev[:, 3])
+    drop = median(ev[:, 3].copy())  # contiguous: one compiled median for every caller
     steep = np.empty(k)
     for j in range(k):
         steep[j] = -d[int(ev[j, 2])]
@@ -452,8 +453,8 @@ def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
     # cycles: the Schmitt trigger's count, or the drops at the two finest scales above
     # white noise where drift or a modulated barrier hide cycles from it
     nc = _cycles(x, G)
-    for w in (1, 2):
-        nc = max(nc, _scale_events(G, C, w, sigma, 0, buf, memo))
+    for w in range(1, 3):
+        nc = max(nc, _scale_events(G, C, w, sigma, np.int64(0), buf, memo))
     cyc = n / max(nc, 1)
     if cyc >= FINE_CYCLE:
         # finely sampled: blocks at every window size stay far below a cycle, and their
@@ -468,14 +469,14 @@ def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
     counts = np.zeros(64, dtype=np.int64)
     deep = np.zeros(64, dtype=np.bool_)
     ns = 0
-    w = 1
+    w = np.int64(1)
     best = -1
     while w <= max(1, n // 32) and ns < 64:
         ws[ns] = w
         counts[ns] = _scale_events(G, C, w, sigma, w_noise, buf, memo)
         k = counts[ns]
         # the larger slips, not all (a multiple-slip trace mixes sizes), span the range
-        deep[ns] = k > 0 and percentile(buf[:k, 3], DEPTH_QUANTILE) >= 0.5 * span
+        deep[ns] = k > 0 and percentile(buf[:k, 3].copy(), DEPTH_QUANTILE) >= 0.5 * span
         if ns > 0 and deep[ns - 1] and _stable(counts[ns - 1], k):
             if best < 0 or counts[ns - 1] > counts[best]:
                 best = ns - 1
@@ -494,13 +495,13 @@ def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
         # read the sticks' bends as noise, or slips split over pixels hid below it.
         # The raw force: a slip averaged into one pixel leaves the top's neighbours
         # close, so at a few samples per slip the despiker cuts the tops as spikes.
-        ce, sc = _coarse_events(x, F)
+        ce, sc = _coarse_events(x, F, np.bool_(False))
         if ce.shape[0] > 0:
             return ce, 1, sc, span
     if k < 3:
         # no stick-slip found: a drift larger than the sawtooth may have hidden the
         # cycles of a coarse line from the straight detrend
-        ce, sc = _coarse_events(x, F, True)
+        ce, sc = _coarse_events(x, F, np.bool_(True))
         if ce.shape[0] > 0:
             return ce, 1, sc, span
     if best < 0:
@@ -668,7 +669,8 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
         return
     xref = 0.5 * (x[lo] + x[hi])
     mask = np.ones(m, dtype=np.bool_)
-    c0, c1, c2 = _robust_fit(x, F, lo, hi, xref, 2, sigma, mask)
+    # np.int64: a literal degree would compile each function once per degree
+    c0, c1, c2 = _robust_fit(x, F, lo, hi, xref, np.int64(2), sigma, mask)
     row[SEG_C0], row[SEG_C1], row[SEG_C2], row[SEG_XREF] = c0, c1, c2, xref
     # the slope is fitted on the rising part only (up to the quadratic's vertex)
     hi_r = hi
@@ -680,7 +682,8 @@ def _fit_segment(x: np.ndarray, F: np.ndarray, lo: int, hi: int, sigma: float,
         hi_r = hi
     if hi_r - trim - lo + 1 >= MIN_FIT_SAMPLES:
         hi_r = min(hi_r, hi - trim)
-    b0, b1, _ = _robust_fit(x, F, lo, hi_r, xref, 1, sigma, mask[: hi_r - lo + 1].copy())
+    b0, b1, _ = _robust_fit(x, F, lo, hi_r, xref, np.int64(1), sigma,
+                            mask[: hi_r - lo + 1].copy())  # fmt: skip
     row[SEG_SLOPE] = b1
     row[SEG_F_LO] = b0 + b1 * (x[lo] - xref)
     row[SEG_F_HI] = b0 + b1 * (x[hi_r] - xref)
