@@ -7,7 +7,7 @@ its 48 s first compile that way, and the verdict's trace checks minutes. Their b
 kernels are serial instead, compiled with ``nogil=True``, and :func:`run_chunks` runs
 them on chunks of lines on Python threads: the same parallelism, without that compile.
 
-The first run after installing still compiles every kernel it meets (about 45 s for
+The first run after installing still compiles every kernel it meets (about 50 s for
 ``stickslip demo`` on a 2-core VM; a second run takes 4 s): :func:`cached` lets a command
 say so before it starts.
 """
