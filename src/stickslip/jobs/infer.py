@@ -29,7 +29,7 @@ from stickslip.diagnostics.ppc import plot_overlay, posterior_predictive_check
 from stickslip.diagnostics.report_html import write_report
 from stickslip.estimators import domain
 from stickslip.estimators.base import Estimator
-from stickslip.estimators.classical import estimator as classical_estimator
+from stickslip.estimators.classical.estimator import KERNELS as CLASSICAL_KERNELS
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.slips import analyse_trace
 from stickslip.estimators.pairs import add_pair_columns
@@ -91,7 +91,7 @@ def kernels_cached() -> bool:
     """Whether the compiled kernels every ``infer`` meets (the verdict's trace checks and
     the classical estimator) are in numba's on-disk cache already; False on the first
     run after installing, which compiles them (:mod:`stickslip.compiled`)."""
-    return cached(*domain.KERNELS, *classical_estimator.KERNELS)
+    return cached(*domain.KERNELS, *CLASSICAL_KERNELS)
 
 
 def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None,
