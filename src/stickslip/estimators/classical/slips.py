@@ -108,7 +108,6 @@ def noise_sigma(F: np.ndarray, s_all: float = -1.0) -> float:
     n = F.size
     if n < 3:
         return 0.0
-    d2 = F[2:] - 2.0 * F[1:-1] + F[:-2]
     if s_all < 0:
         s_all = white_sigma(F)
     d1 = F[1:] - F[:-1]
@@ -121,6 +120,7 @@ def noise_sigma(F: np.ndarray, s_all: float = -1.0) -> float:
             keep[max(i - 2, 0) : min(i + 2, n - 2)] = False
     if keep.sum() < 8:
         return s_all
+    d2 = F[2:] - 2.0 * F[1:-1] + F[:-2]  # only here: the early returns need none
     s_stick = _clipped_sigma(d2[keep])
     return s_stick if s_stick < STICK_NOISE_RATIO * s_all else s_all
 
@@ -510,6 +510,15 @@ def detect_slips(x: np.ndarray, F: np.ndarray, s_all: float = -1.0
 
 
 @njit(cache=True, error_model="numpy")
+def _after_slip(events: np.ndarray, k: int, w: int) -> int:
+    """The first sample after slip ``k``'s run of ``D_w`` and its window: where the next
+    stick starts (before its guard sample). A slip smeared by the detector's bandwidth
+    (a run longer than the window) relaxes after its steepest part for as long again."""
+    first, last = int(events[k, 0]), int(events[k, 1])
+    return last + w + max(0, last - first + 1 - w)
+
+
+@njit(cache=True, error_model="numpy")
 def _split_sticks(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np.ndarray:
     """Slips that the detection missed inside the stick segments of a coarse line.
 
@@ -585,7 +594,7 @@ def _split_sticks(F: np.ndarray, events: np.ndarray, w: int, sigma: float) -> np
         if hi >= lo:
             free[lo : hi + 1] = False
         if k < ne:
-            start = int(events[k, 1]) + w + max(0, int(events[k, 1] - events[k, 0]) + 1 - w)
+            start = _after_slip(events, k, w)
     if nx == 0:
         return events
     out = np.empty((ne + nx, 4))
@@ -805,9 +814,7 @@ def fit_segments(x: np.ndarray, F: np.ndarray, events: np.ndarray, w: int, tol: 
             lo, hi = _rising_run(F, lo, hi, raw_lo, end)
         _fit_segment(x, F, lo, hi, tol, 1 if k < ne else 0, segs[k])
         if k < ne:
-            # a slip smeared by the detector's bandwidth (a run of D_w longer than the
-            # window) relaxes after its steepest part for as long again
-            start = int(events[k, 1]) + w + max(0, int(events[k, 1] - events[k, 0]) + 1 - w)
+            start = _after_slip(events, k, w)
     for k in range(ne):
         slips[k, SLIP_CENTRE] = events[k, 2]
         pre, post = segs[k], segs[k + 1]
