@@ -234,3 +234,16 @@ def test_sweep_config_json_backend():
 
 if __name__ == "__main__":
     _run_cases(Path(sys.argv[1]))
+
+
+def test_import_restores_the_row_stack_that_numba_cuda_needs():
+    """numba-cuda 0.30.4 registers np.row_stack, which numpy 2.5 removed (on a device
+    with numpy 2.5.2 no kernel ran without the alias); the backend module puts it back."""
+    code = (
+        "import numpy as np\n"
+        "np.__dict__.pop('row_stack', None)\n"
+        "import stickslip.simulators.cuda\n"
+        "assert np.row_stack is np.vstack\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
