@@ -16,7 +16,10 @@ bench on seed ``BENCH_SEED + 1``, the figures are reported on other seeds):
   ``"eval"`` implementation, every family at its documented probability).
 
 Prints, per set, the fraction of rows in domain with the line model (the default) and
-the classical estimator, the reasons given, and the line model's throughput
+the classical estimator, the reasons given; on the sets with truths, the factor by which
+the line model's out-of-domain rows' 95 % intervals had to be widened to cover 95 % of
+the truths (the verdict's widening factors are chosen from it on seed 1); and
+the line model's throughput
 (:meth:`LineEstimator.predict` on ``--n-speed`` traces) with and without the verdict,
 timed alternately in the same sitting, and the machine. Sets are cached under
 ``--work`` (default build/domain, git-ignored).
@@ -53,6 +56,8 @@ LATTICE_NM = 0.246
 NON_PT = ("white_noise", "random_walk", "flat", "square_wave", "reversed_sawtooth",
           "smooth_sliding", "lattice_0.6")  # fmt: skip
 PT = ("clean", "lab_bench", "families")
+#: Sets whose traces carry truths (the widening of out-of-domain rows is measured on them).
+TRUTH_SETS = ("smooth_sliding", "lattice_0.6", *PT)
 X_NM = np.arange(512) * (11.0 / 512)
 
 
@@ -305,6 +310,43 @@ def print_rates(label: str, res: dict[str, tuple[float, Counter]]) -> None:
     print(f"  {'non-PT overall':<18}{non:>7.3f}   (out of domain: {1 - non:.3f})")
 
 
+def widening_needed(estimator, sets: dict[str, list[Trace]]) -> None:
+    """Per set with truths: how far the 95 % intervals of its out-of-domain rows had to
+    be widened to cover 95 % of the truths, as a factor on the calibrated half-width
+    (in log space for U0 and K, as :func:`~stickslip.estimators.domain.widen_rows`
+    widens), and the coverage of the intervals as the verdict widens them."""
+    from stickslip.jobs.evaluate import truth_from_traces
+
+    keys = (("F_mean_nN", False), ("U0_eV", True), ("K_N_m", True))
+    print("\nout-of-domain rows (line model): the factor on the 95 % half-width that covers "
+          "95 % of the truths; in brackets the coverage as widened")  # fmt: skip
+    for name, traces in sets.items():
+        tables = {}
+        for widen in (False, True):
+            estimator.widen_out_of_domain = widen
+            tables[widen] = estimator.predict(traces)
+        estimator.widen_out_of_domain = True
+        truth = truth_from_traces(tables[True], traces)
+        pairs = [(r, w) for r, w in zip(tables[False].rows, tables[True].rows, strict=True)
+                 if not r.get("in_domain") and r.get("quality") == "ok" and r["trace"] in truth]
+        if not pairs:
+            continue
+        cells = []
+        for k, log in keys:
+            need, covered = [], []
+            for r, w in pairs:
+                m, t, lo, hi = r[k], truth[r["trace"]][k], r[f"{k}_lo95"], r[f"{k}_hi95"]
+                if not np.all(np.isfinite([m, t, lo, hi])) or (log and min(m, t, lo) <= 0):
+                    continue
+                side = hi if t > m else lo
+                gap, half = (np.log(t / m), np.log(side / m)) if log else (t - m, side - m)
+                need.append(gap / half if half != 0 else np.inf)
+                covered.append(w[f"{k}_lo95"] <= t <= w[f"{k}_hi95"])
+            cells.append(f"{k.split('_')[0]} {np.quantile(need, 0.95):.2f} "
+                         f"({np.mean(covered):.3f})")  # fmt: skip
+        print(f"  {name:<18}{len(pairs):>5d} rows   " + "   ".join(cells))
+
+
 def speed(estimator, n: int, repeats: int, work: Path) -> None:
     """Time ``estimator.predict`` with and without the verdict, alternately."""
     base = clean_traces(200, 1, work) + bench_traces(67, BENCH_SEED + 1, work)
@@ -365,6 +407,7 @@ def main() -> None:
           f"{args.bench_seed} ({len(sets['lab_bench'])} traces)")
     print_rates("line model (bundled)", rates(line, sets))
     print_rates("classical estimator", rates(ClassicalEstimator(), sets))
+    widening_needed(line, {k: v for k, v in sets.items() if k in TRUTH_SETS})
     if not args.skip_speed:
         speed(line, args.n_speed, args.repeats, args.work)
 

@@ -189,6 +189,20 @@ def test_only_rows_out_of_domain_are_widened():
     assert outside["eta"] == 5.0  # the estimate itself stays
 
 
+def test_a_misstated_lattice_widens_by_its_own_factor():
+    """Slips closer than the stated lattice bias U0 by the lattice ratio: those rows take
+    the spacing check's larger factor, the others the common one."""
+    reversed_row, close = {**row(), "eta_lo95": 4.0}, {**row(), "eta_lo95": 4.0}
+    assess([reversed_row, close], [X, X], [sawtooth(reverse=True), sawtooth(period_nm=0.6 * A)],
+           [A, A])  # fmt: skip
+    assert "lattice spacing" in close["domain_reason"]
+    assert "lattice spacing" not in reversed_row["domain_reason"]
+    f = D.CHECK_WIDEN_FACTORS["spacing"]
+    assert f > D.WIDEN_FACTOR
+    assert close["eta_lo95"] == pytest.approx(5.0 * (4.0 / 5.0) ** f)
+    assert reversed_row["eta_lo95"] == pytest.approx(5.0 * (4.0 / 5.0) ** D.WIDEN_FACTOR)
+
+
 def test_embedding_reference_flags_lines_far_from_its_reference(tmp_path):
     rng = np.random.default_rng(0)
     scales = np.linspace(3.0, 0.1, 40)

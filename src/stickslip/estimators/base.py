@@ -87,6 +87,9 @@ class TraceEstimator:
     #: (``in_domain``, ``domain_score``, ``domain_reason``; :mod:`stickslip.estimators.domain`)
     #: and widens the intervals of rows out of domain.
     domain_verdict: bool = True
+    #: Whether the verdict widens the intervals of rows out of domain (off only to
+    #: measure how much they need: ``benchmarks/domain.py``).
+    widen_out_of_domain: bool = True
     #: The least estimate of eta the verdict keeps in domain: the trained window's edge,
     #: or a little above it for models that cannot report an eta below their window
     #: (:data:`~stickslip.estimators.domain.ETA_EDGE`).
@@ -162,5 +165,6 @@ class TraceEstimator:
             table.rows.append(row)
         if self.domain_verdict:
             assess(table.rows, [t.x_nm for t in traces], [t.force_nN for t in traces],
-                   [c.lattice_nm for c in conds], eta_edge=self.eta_edge)  # fmt: skip
+                   [c.lattice_nm for c in conds], widen=self.widen_out_of_domain,
+                   eta_edge=self.eta_edge)  # fmt: skip
         return table
