@@ -13,7 +13,9 @@ the calibration (leave-one-family-out):
 - the cells (one set, one quantity, one pool) outside 0.90-0.98, and how many would
   fall outside by chance alone if each set's true coverage were its pooled coverage
   (the sum over cells of the binomial probability of landing outside the band);
-- the sets whose pooled coverage itself lies outside the band.
+- the sets whose pooled coverage itself lies outside the band, with the pooled coverage
+  of their rows in domain (out of domain, the verdict widens the intervals on purpose;
+  summaries written since 2026-11-26 hold it).
 
     python benchmarks/families.py --threads 2                      # pool 601
     python benchmarks/families.py --threads 2 --eval-seed 602 --n-bench 0 --no-pairs
@@ -45,10 +47,14 @@ def outside_probability(n: int, p: float, low: float = LOW, high: float = HIGH) 
     return float(above + below)
 
 
-def cells(summaries: dict[int, dict]) -> dict[tuple[str, str, str], dict[int, tuple[int, float]]]:
-    """``(calibration, set, quantity) -> {pool: (lines, coverage)}`` for the family sets
-    calibrated on every family and the leave-one-family-out sets."""
-    out: dict[tuple[str, str, str], dict[int, tuple[int, float]]] = {}
+Cell = tuple[int, float, int | None, float | None]
+
+
+def cells(summaries: dict[int, dict]) -> dict[tuple[str, str, str], dict[int, Cell]]:
+    """``(calibration, set, quantity) -> {pool: (lines, coverage, lines in domain, their
+    coverage)}`` for the family sets calibrated on every family and the
+    leave-one-family-out sets (the last two None in summaries written without them)."""
+    out: dict[tuple[str, str, str], dict[int, Cell]] = {}
     for seed, s in summaries.items():
         rows = [("families", name, r) for name, r in s["families"].items()
                 if name == "all families" or name.startswith("with ")]  # fmt: skip
@@ -56,7 +62,11 @@ def cells(summaries: dict[int, dict]) -> dict[tuple[str, str, str], dict[int, tu
         for cal, name, r in rows:
             for key, q in QUANTITIES.items():
                 cov = float(r["coverage95"][key])
-                out.setdefault((cal, name, q), {})[seed] = (int(r["n"]), cov)
+                inside = r.get("coverage95_in_domain", {}).get(key)
+                n_in = r.get("n_in_domain")
+                out.setdefault((cal, name, q), {})[seed] = (
+                    int(r["n"]), cov, None if n_in is None else int(n_in),
+                    None if inside is None else float(inside))  # fmt: skip
     return out
 
 
@@ -88,7 +98,13 @@ def main() -> None:
         n_out += sum(flags)
         expected += sum(probs)
         if not LOW <= p <= HIGH:
-            pooled_out.append(f"{cal} {name} {q} {p:.3f}")
+            text = f"{cal} {name} {q} {p:.3f}"
+            m = [per[s][2:] for s in args.seeds if s in per]
+            if all(ni is not None and ci is not None for ni, ci in m):
+                n_in = sum(ni for ni, _ in m)
+                c_in = sum(round(ni * ci) for ni, ci in m) / n_in
+                text += f" ({c_in:.3f} on the {n_in} of {n.sum()} lines in domain)"
+            pooled_out.append(text)
         cols = " ".join(f"{ci:.3f}{'*' if f else ' '}" for ci, f in zip(c, flags, strict=True))
         print(f"  {cal:12s} {name:26s} {q:4s} {cols}  {p:.3f}   {np.mean(probs):.3f}")
     print(f"\ncells (set, quantity, pool): {n_cells}; outside the band: {n_out}; "

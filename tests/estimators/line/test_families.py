@@ -97,6 +97,13 @@ def test_calibration_on_families_refits_only_the_spread(clean):
     # on its own calibration lines the 95 % intervals hold (a quantile fit)
     cov = report["val_coverage95"]
     assert all(0.85 <= cov[k] <= 1.0 for k in cov), cov
+    # per family: the calibration lines that carry it, and only those (mains left out)
+    groups = report["val_per_group"]
+    assert "mains" not in groups and "gain" in groups
+    n_lines = report["n_calibration"]
+    assert all(0 < g["n"] < n_lines for g in groups.values())
+    assert groups["detector"]["n"] > groups["telegraph"]["n"]  # p 0.8 against 0.2
+    assert all(0.5 <= c <= 1.0 for g in groups.values() for c in g["coverage95"].values())
     fc = report["family_calibration"]
     assert "mains" not in fc["families"] and fc["seed"] == 11 and fc["draws"] == 3
     assert fc["n_trajectories"] == clean.n

@@ -229,6 +229,8 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     if settings.offset is not None:
         lines = restate_offsets(lines, settings.offset, settings.seed)
     cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None)
+    # the calibration lines that carry each family (training draws, if any, carry none)
+    groups = {f: lines.applied[:, j] for j, f in enumerate(fx.FAMILIES)}
     if settings.training_draws:
         mild, Y_mild = calibration_lines(ens, draw_training_lines(clean, settings.seed,
                                                                   settings.training_draws))
@@ -239,9 +241,11 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                                                          mild.observed_mean]),
                            m3_nN=np.concatenate([cs.m3_nN, mild.m3_nN]))  # fmt: skip
         Y = np.concatenate([Y, Y_mild])
+        groups = {f: np.concatenate([m, np.zeros(len(mild.lines), bool)])
+                  for f, m in groups.items()}  # fmt: skip
     power = ens.exponent is not None and not np.allclose(ens.exponent, 1.0)
     ens.offset, ens.compression = settings.offset, settings.compression
-    report = calibrate_and_report(ens, cs, Y, ens.classes, power)
+    report = calibrate_and_report(ens, cs, Y, ens.classes, power, groups)
     report["family_calibration"] = {**settings.to_dict(), "n_trajectories": clean.n,
                                     "clean_fingerprint": clean.fingerprint()}  # fmt: skip
     return report

@@ -481,10 +481,12 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
 
 
 def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
-                         classes: SpreadClasses | None = None,
-                         power: bool = True) -> dict:  # fmt: skip
+                         classes: SpreadClasses | None = None, power: bool = True,
+                         groups: dict[str, np.ndarray] | None = None) -> dict:  # fmt: skip
     """Calibrate ``ens`` on calibration lines (:func:`calibrate`) and report its errors and
-    interval coverage there, overall, per stratum (corrupted, pristine) and per class."""
+    interval coverage there, overall, per stratum (corrupted, pristine), per class and,
+    under ``"val_per_group"``, on the lines of each of ``groups`` (name: boolean mask
+    over the calibration lines, e.g. the lines that carry one effect family)."""
     mu, z_cal, cls = calibrate(ens, cs, Y_cal, classes, power)
     z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
     pred = mu * ens.y_std + ens.y_mean
@@ -519,6 +521,11 @@ def calibrate_and_report(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray
              "coverage95": named(np.mean(z_cal[cls == c] <= z95, axis=0))}
             for c in range(classes.n) if np.any(cls == c)
         ]  # fmt: skip
+    if groups:
+        report["val_per_group"] = {
+            name: {"n": int(m.sum()), "coverage95": named(np.mean(z_cal[m] <= z95, axis=0))}
+            for name, m in groups.items() if m.any()
+        }  # fmt: skip
     for g, name in ((0, "corrupted"), (1, "pristine")):
         m = cs.strata == g
         if not m.any():  # e.g. calibration on the nuisance prior: no pristine stratum
