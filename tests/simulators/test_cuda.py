@@ -232,9 +232,6 @@ def test_sweep_config_json_backend():
     assert SweepConfig.from_json(cpu.to_json()) == cpu
 
 
-if __name__ == "__main__":
-    _run_cases(Path(sys.argv[1]))
-
 
 def test_import_restores_the_row_stack_that_numba_cuda_needs():
     """numba-cuda 0.30.4 registers np.row_stack, which numpy 2.5 removed (on a device
@@ -247,3 +244,7 @@ def test_import_restores_the_row_stack_that_numba_cuda_needs():
     )
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr[-2000:]
+
+
+if __name__ == "__main__":
+    _run_cases(Path(sys.argv[1]))
