@@ -232,7 +232,6 @@ def test_sweep_config_json_backend():
     assert SweepConfig.from_json(cpu.to_json()) == cpu
 
 
-
 def test_import_restores_the_row_stack_that_numba_cuda_needs():
     """numba-cuda 0.30.4 registers np.row_stack, which numpy 2.5 removed (on a device
     with numpy 2.5.2 no kernel ran without the alias); the backend module puts it back."""
