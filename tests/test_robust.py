@@ -71,3 +71,21 @@ def test_white_sigma_is_the_noise_of_a_line_from_its_second_differences():
     assert white_sigma(F) == pytest.approx(0.5, rel=0.02)
     assert white_sigma(F) == mad_sigma(np.diff(F, 2)) / np.sqrt(6.0)
     assert white_sigma(F[:2]) == 0.0
+
+
+def test_selection_with_many_equal_values_keeps_the_partition():
+    """Past 64 rounds (many equal values) the selection finishes by three-way partitions:
+    the same order statistic as numpy's, with every value left of ``k`` no larger and
+    every value right of it no smaller."""
+    from stickslip.robust import _select_inplace
+
+    rng = np.random.default_rng(5)
+    lines = [np.repeat([2.0, -1.0, 0.5], 300), np.r_[np.zeros(700), rng.normal(size=9)],
+             rng.integers(0, 3, 1001).astype(float)]  # fmt: skip
+    for v in lines:
+        for k in (0, 1, v.size // 3, v.size // 2, v.size - 2, v.size - 1):
+            a = v.copy()
+            x = _select_inplace(a, k)
+            assert x == np.partition(v, k)[k] == a[k]
+            assert a[:k].max(initial=-np.inf) <= x <= a[k + 1 :].min(initial=np.inf)
+            np.testing.assert_array_equal(np.sort(a), np.sort(v))  # a permutation

@@ -96,7 +96,7 @@ def run_estimation(
             found, errors = inf.read_inputs(traces, opts, progress=bar)
     info(f"estimator: {estimator.describe()}; {len(found)} trace(s) read")
     if found and not inf.kernels_cached():
-        info("first run after installing: compiling the numerical kernels, once (about a "
+        info("first run after installing: compiling the numerical kernels, once (under a "
              "minute; later runs start in seconds)")  # fmt: skip
     with progress_bar(len(found) if check else 0, "check") as bar:
         result = inf.infer(estimator, found, errors, lattice_nm=lattice,
