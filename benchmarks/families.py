@@ -260,7 +260,7 @@ def main() -> None:
             print("\ncalibration lines that carry each family (\"train\" implementations), "
                   "in-sample 95 % coverage U0 / K")  # fmt: skip
             for f, g in report.get("val_per_group", {}).items():
-                cov = " ".join(f"{c:.3f}" for c in list(g["coverage95"].values())[1:3])
+                cov = " ".join(f"{g['coverage95'][k]:.3f}" for k in ("log_U0_ref", "log_K_ref"))
                 print(f"  with {f:21s} {g['n']:4d}  {cov}")
             summary["calibration_per_family"] = report.get("val_per_group", {})
         print(f"\ncalibration: {label} ({source})\n{HEAD}")
