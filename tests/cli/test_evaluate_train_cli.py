@@ -60,6 +60,10 @@ def test_evaluate_on_labelled_trace_files(labelled, tmp_path, model):
         assert ("coverage95" in m) == (model is None)
     assert doc["U0_eV"]["rel_rmse"] < 0.1 and doc["K_N_m"]["rel_rmse"] < 0.1
     assert doc["info"]["left_out"] == 1
+    # the line model's verdict: how many scored rows it put in and out of domain
+    if model is None:
+        assert doc["domain"]["in_domain"] + doc["domain"]["out_of_domain"] == 6
+        assert f"in domain: {doc['domain']['in_domain']} of 6 rows" in r.stdout
     for name in ("predictions.csv", "parity.png", "metrics.csv"):
         assert (out / name).is_file()
     assert (out / "reliability.png").is_file() == (model is None)

@@ -58,6 +58,30 @@ def test_infer_reports_bad_files_and_processes_the_rest(traces, tmp_path):
     assert len(list((tmp_path / "plots").glob("*.png"))) == 2
 
 
+def test_infer_shows_the_verdict_and_why_a_row_is_out_of_domain(traces, tmp_path):
+    # white noise and a reversed sawtooth beside a PT trace: the terminal table marks
+    # each row, one line per out-of-domain trace says why, and the count says how many;
+    # out of domain is no failure (exit 0), the rows keep their (widened) numbers
+    x = np.arange(512) * 0.0215
+    write_trace_csv(tmp_path / "noise.csv", x, np.random.default_rng(0).normal(0, 1, x.size))
+    write_trace_csv(tmp_path / "reversed.csv", x, 2 - 2 * ((x / 0.6) % 1) ** 0.2)
+    out = tmp_path / "res.csv"
+    r = _run(["infer", traces / "good0.csv", tmp_path / "noise.csv", tmp_path / "reversed.csv",
+              "--out", out, "--no-classical"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    table = {ln.split()[0]: ln.split() for ln in r.stdout.splitlines()}
+    assert "domain" in table["trace"]
+    assert table["good0"][-1] == "in"
+    assert table["noise"][-1] == "OUT" and table["reversed"][-1] == "OUT"
+    why = [ln for ln in r.stderr.splitlines() if ln.startswith("out of domain: ")]
+    assert len(why) == 2
+    assert "noise: " in why[0] and "no stick-slip" in why[0]
+    assert "reversed: jumps up as well as down" in why[1]
+    assert "3 ok (2 out of domain: intervals widened), 0 flagged" in r.stderr
+    rows = {row["trace"]: row for row in csv.DictReader(out.open())}
+    assert rows["noise"]["in_domain"] == "False" and rows["noise"]["U0_eV"] != ""
+
+
 def test_infer_empty_argument_is_reported_not_read_as_the_current_folder(
     traces, tmp_path, monkeypatch
 ):

@@ -122,9 +122,13 @@ def run_estimation(
         info(f"wrote {len(panels)} panels in {plots}")
     if report is not None:
         written.append(inf.write_run_report(result, estimator, report, traces, sys.argv))
+    for line in result.domain_lines():
+        info(f"out of domain: {line}")
     n_flag = len(result.table.rows) - len(ok) - len(result.refused)
-    info(f"{len(ok)} ok, {n_flag} flagged, {len(result.refused)} without an estimate -> "
-         + ", ".join(str(p) for p in written))
+    n_out = len(result.out_of_domain())
+    out_note = f" ({n_out} out of domain: intervals widened)" if n_out else ""
+    info(f"{len(ok)} ok{out_note}, {n_flag} flagged, {len(result.refused)} without an "
+         "estimate -> " + ", ".join(str(p) for p in written))  # fmt: skip
     if not ok and not any(has_estimate(r) for r in result.table.rows):
         return EXIT_FAILED_INPUT
     return EXIT_FAILED_INPUT if result.refused else EXIT_OK
@@ -216,7 +220,8 @@ def evaluate_cmd(
 
     metrics.json holds one object per target (F_mean_nN, U0_eV, K_N_m, eta) with rmse,
     rel_rmse, median_rel, n, answered and, for estimators with intervals, coverage68 and
-    coverage95; 'info' holds the estimator, data and conditions.
+    coverage95; 'info' holds the estimator, data and conditions; 'domain' how many rows
+    the in/out-of-domain verdict put in and out of domain.
     """
     inputs = list(traces or []) + list(data or [])
     if not inputs:

@@ -23,7 +23,14 @@ from stickslip.diagnostics.calibration import reliability_plot
 from stickslip.diagnostics.metrics import target_metrics
 from stickslip.diagnostics.plots import parity_plot
 from stickslip.estimators.base import Estimator
-from stickslip.estimators.table import TARGETS, ResultTable, by_trace, float_or_nan, read_table
+from stickslip.estimators.table import (
+    TARGETS,
+    ResultTable,
+    by_trace,
+    float_or_nan,
+    has_estimate,
+    read_table,
+)
 from stickslip.traces.dataset import Dataset, dataset_traces
 from stickslip.units import eta_from
 
@@ -57,7 +64,21 @@ class Evaluation:
                 f"{m['median_rel']:>9.2%}"
                 + (f"{c68:>7.3f}{c95:>7.3f}" if c68 is not None else f"{'-':>7}{'-':>7}")
             )
+        if self.domain is not None:
+            n_in, n_out = self.domain
+            lines.append(f"in domain: {n_in} of {n_in + n_out} rows with an estimate"
+                         + (f" ({n_in / (n_in + n_out):.3f}); the {n_out} out of domain count "
+                            "above with their widened intervals" if n_out else ""))  # fmt: skip
         return "\n".join(lines)
+
+    @property
+    def domain(self) -> tuple[int, int] | None:
+        """Rows in domain and out of domain among the matched rows with an estimate;
+        None for an estimator without the in/out-of-domain verdict."""
+        verdicts = [r.get("in_domain") for r in self.table.rows if has_estimate(r)]
+        if not any(isinstance(v, bool) for v in verdicts):
+            return None
+        return sum(v is True for v in verdicts), sum(v is False for v in verdicts)
 
 
 def truth_from_table(path: str | os.PathLike) -> dict[str, dict[str, float]]:
@@ -145,6 +166,8 @@ def write_evaluation(ev: Evaluation, out_dir: str | os.PathLike,
     out.mkdir(parents=True, exist_ok=True)
     doc: dict[str, Any] = {k: _json_safe(m) for k, m in ev.metrics.items()}
     doc.update({"info": _json_safe(dict(info or {})), "left_out": ev.problems})
+    if ev.domain is not None:
+        doc["domain"] = {"in_domain": ev.domain[0], "out_of_domain": ev.domain[1]}
     paths = [out / "metrics.json", out / "metrics.csv", out / "predictions.csv",
              out / "parity.png"]
     write_text_atomic(paths[0], json.dumps(doc, indent=2) + "\n")

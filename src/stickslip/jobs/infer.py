@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import textwrap
 import zlib
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -71,20 +72,44 @@ class InferResult:
     def error_lines(self) -> list[str]:
         """One line per unreadable input, and per file and reason for refused traces
         (a map whose 300 lines fail the same way gives one line with the count)."""
-        lines = [str(e) for e in self.read_errors]
-        groups: Counter[tuple[str, str]] = Counter()
-        first: dict[tuple[str, str], str] = {}
-        for i in self.refused:
+        refused = [(i, str(self.table.rows[i]["quality"])) for i in self.refused]
+        return [str(e) for e in self.read_errors] + self._grouped(refused)
+
+    def out_of_domain(self) -> list[int]:
+        """Rows with an estimate that the in/out-of-domain verdict put out of domain."""
+        return [i for i, r in enumerate(self.table.rows)
+                if has_estimate(r) and r.get("in_domain") is False]  # fmt: skip
+
+    def domain_lines(self, limit: int = 10) -> list[str]:
+        """One line per out-of-domain trace with the verdict's reason, and per file and
+        kind of reason for map lines (the numbers in a reason's parentheses differ
+        from line to line, so a map's lines are grouped without them); at most
+        ``limit`` lines, then how many more (each row's ``domain_reason`` is in the
+        table)."""
+        out = [(i, str(self.table.rows[i].get("domain_reason") or "out of domain"))
+               for i in self.out_of_domain()]  # fmt: skip
+        lines = self._grouped(out, key=lambda reason: _DETAIL.sub("", reason))
+        if len(lines) > limit:
+            lines = [*lines[:limit], f"... and {len(lines) - limit} more (domain_reason)"]
+        return lines
+
+    def _grouped(self, items: Sequence[tuple[int, str]],
+                 key: Callable[[str], str] = str) -> list[str]:  # fmt: skip
+        """``trace: reason`` for each (row, reason), one ``file: n lines: reason`` line
+        per file and ``key(reason)`` where several lines of one file share it."""
+        groups: dict[tuple[str, str], list[tuple[str, str]]] = {}
+        for i, reason in items:
             row, tr = self.table.rows[i], self.traces[i]
             if tr is None:
                 continue
-            key = (tr.source or row["trace"], str(row["quality"]))
-            groups[key] += 1
-            first.setdefault(key, row["trace"])
-        for (src, reason), n in groups.items():
-            lines.append(f"{src}: {n} lines: {reason}" if n > 1 else f"{first[(src, reason)]}: "
-                         f"{reason}")  # fmt: skip
-        return lines
+            groups.setdefault((tr.source or row["trace"], key(reason)), []).append(
+                (row["trace"], reason))
+        return [f"{src}: {len(g)} lines: {k}" if len(g) > 1 else f"{g[0][0]}: {g[0][1]}"
+                for (src, k), g in groups.items()]  # fmt: skip
+
+
+#: A parenthesised detail of a verdict's reason (numbers that differ from line to line).
+_DETAIL = re.compile(r"\s*\([^()]*\)")
 
 
 def kernels_cached() -> bool:
@@ -291,6 +316,9 @@ def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.Pa
                 title += " (95 % intervals)"
             if "gof" in row:
                 title += f", gof = {row['gof']:.2f}{' FLAGGED' if row['ppc_flag'] else ''}"
+            if row.get("in_domain") is False:
+                title += "\n" + textwrap.fill("OUT OF DOMAIN (intervals widened): "
+                                              + str(row.get("domain_reason")), 110)
             plot_overlay(t.x_nm, t.force_nN, result.replicates.get(i), title, path)
         else:
             continue
@@ -300,9 +328,14 @@ def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.Pa
     return paths
 
 
+#: How the terminal table shows a row's in/out-of-domain verdict.
+DOMAIN_MARK = {True: "in", False: "OUT"}
+
+
 def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit: int = 40) -> str:
     """A compact terminal table of the estimated rows: estimates, +- their std (or the
-    95 % interval), the classical estimator's U0 and K beside, true values if known.
+    95 % interval), the in/out-of-domain verdict (:data:`DOMAIN_MARK`), the classical
+    estimator's U0 and K beside, true values if known.
     Rows in volts (no calibration) give their values in V, V nm and V/nm, and say so."""
     rows = [r if "U0_V_nm" not in r else {**r, **{k: r.get(v) for k, v in VOLT_NAMES.items()},
                                           **{f"{k}_std": r.get(f"{v}_std")
@@ -311,6 +344,8 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
     w = min(max([len(r["trace"]) for r in rows] + [5]), 40) + 1
     has_cl = any("classical_U0_eV" in r for r in rows)
     head = f"{'trace':<{w}}{'<F> nN':>9}{'U0 eV':>16}{'K N/m':>16}{'eta':>8}"
+    has_dom = any("in_domain" in r for r in rows)
+    head += f"{'domain':>8}" if has_dom else ""
     head += f"{'gof':>6}" if any("gof" in r for r in rows) else ""
     head += f"{'| classical U0':>15}{'K':>8}" if has_cl else ""
     head += f"{'| true U0':>10}{'K':>7}" if truth else ""
@@ -319,11 +354,20 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
     def num(v: Any) -> float:
         return float(v) if isinstance(v, (int, float, np.number)) and v is not None else np.nan
 
+    def pm(v: Any) -> str:
+        # five characters whatever the size: a widened interval's std can be 400
+        v = num(v)
+        if not v >= 9.995:  # NaN too
+            return f"{v:<5.2f}"
+        return f"{v:<5.1f}" if v < 99.95 else f"{v:<5.0f}" if v < 99999.5 else f"{v:.0e}"
+
     for r in rows[:limit]:
         s = (f"{r['trace'][: w - 1]:<{w}}{num(r['F_mean_nN']):>9.3f}"
-             f"{num(r['U0_eV']):>9.3f}+-{num(r.get('U0_eV_std')):<5.2f}"
-             f"{num(r['K_N_m']):>9.2f}+-{num(r.get('K_N_m_std')):<5.2f}"
+             f"{num(r['U0_eV']):>9.3f}+-{pm(r.get('U0_eV_std'))}"
+             f"{num(r['K_N_m']):>9.2f}+-{pm(r.get('K_N_m_std'))}"
              f"{num(r['eta']):>8.2f}")
+        if has_dom:
+            s += f"{DOMAIN_MARK.get(r.get('in_domain'), '-'):>8}"
         if "gof" in r:
             s += f"{r['gof']:>5.1f}{'!' if r.get('ppc_flag') else ' '}"
         if has_cl:
