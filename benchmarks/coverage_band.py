@@ -86,17 +86,22 @@ def main() -> None:
     print(f"95 % coverage per pool and pooled; band {LOW:.2f}-{HIGH:.2f}; * outside the band")
     print(f"  {'calibration':12s} {'set':26s} {'':4s} {seeds}  pooled  P(outside)")
     n_cells = n_out = 0
+    per_pool = dict.fromkeys(args.seeds, 0)
     expected = 0.0
     pooled_out = []
+    pooled: dict[str, float] = {}
     for (cal, name, q), per in table.items():
         n = np.array([per[s][0] for s in args.seeds if s in per])
         c = np.array([per[s][1] for s in args.seeds if s in per])
         p = float(np.sum(np.round(c * n)) / n.sum())
         probs = [outside_probability(int(ni), p) for ni in n]
         flags = [ci < LOW or ci > HIGH for ci in c]
+        for s, f in zip((s for s in args.seeds if s in per), flags, strict=True):
+            per_pool[s] += f
         n_cells += c.size
         n_out += sum(flags)
         expected += sum(probs)
+        pooled[f"{cal} {name} {q}"] = p
         if not LOW <= p <= HIGH:
             text = f"{cal} {name} {q} {p:.3f}"
             m = [per[s][2:] for s in args.seeds if s in per]
@@ -109,8 +114,13 @@ def main() -> None:
         print(f"  {cal:12s} {name:26s} {q:4s} {cols}  {p:.3f}   {np.mean(probs):.3f}")
     print(f"\ncells (set, quantity, pool): {n_cells}; outside the band: {n_out}; "
           f"expected outside by chance at each set's pooled coverage: {expected:.1f}")  # fmt: skip
+    print("cells outside the band per pool: "
+          + ", ".join(f"{s} {k}" for s, k in per_pool.items()))  # fmt: skip
     print(f"pooled coverages outside the band: {len(pooled_out)} of {len(table)}"
           + "".join(f"\n  {s}" for s in pooled_out))  # fmt: skip
+    ranked = sorted(pooled, key=pooled.__getitem__)
+    for label, keys in (("highest", ranked[:-4:-1]), ("lowest", ranked[:3])):
+        print(f"{label} pooled: " + "; ".join(f"{k} {pooled[k]:.4f}" for k in keys))
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}")  # fmt: skip
 
