@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import importlib
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from numba import njit
 
-from stickslip.compiled import cached, chunk_bounds, run_chunks
+from stickslip.compiled import cached, chunk_bounds, compile_ahead, run_chunks
 from stickslip.estimators import domain
 from stickslip.estimators.classical import estimate_array
 from stickslip.estimators.classical import estimator as classical_estimator
@@ -73,3 +78,72 @@ def test_cached_after_a_call_and_never_for_a_kernel_without_a_disk_cache():
     assert kernels_cached()
     assert not cached(_square_rows)  # compiled, but without cache=True
     assert not cached(np.sum)  # not a numba kernel at all
+
+
+def test_compile_ahead_runs_its_steps_side_by_side_in_their_own_processes(
+        tmp_path, monkeypatch):  # fmt: skip
+    # each step records its process and when it ran; two steps that each wait for the
+    # other to start can only both finish if they run at the same time
+    (tmp_path / "steps_probe.py").write_text(
+        "import os, pathlib, sys, time\n"
+        f"HERE = pathlib.Path({str(tmp_path)!r})\n"
+        "def _step(name, other):\n"
+        "    (HERE / name).write_text(str(os.getpid()))\n"
+        "    t = time.time()\n"
+        "    while not (HERE / other).exists():\n"
+        "        if time.time() - t > 60: sys.exit(3)\n"
+        "        time.sleep(0.01)\n"
+        "def a(): _step('a', 'b')\n"
+        "def b(): _step('b', 'a')\n"
+        "def fails(): raise RuntimeError('no')\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    probe = importlib.import_module("steps_probe")
+    # a step is a function (a worker imports it by its name) or that name
+    codes = compile_ahead([probe.a, "steps_probe:b", probe.fails, "no_such_module:f"],
+                          processes=2)  # fmt: skip
+    assert codes[:2] == [0, 0] and codes[2] != 0 and codes[3] != 0
+    pids = {(tmp_path / n).read_text() for n in "ab"}
+    assert len(pids) == 2 and str(os.getpid()) not in pids
+    assert compile_ahead([]) == []
+
+
+def test_compile_ahead_gives_up_on_a_step_past_its_time(tmp_path, monkeypatch):
+    (tmp_path / "slow_probe.py").write_text("import time\ndef f(): time.sleep(30)\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    assert compile_ahead(["slow_probe:f"], timeout_s=2) == [-1]
+
+
+@pytest.mark.slow
+def test_a_first_run_compiles_its_kernels_in_worker_processes(tmp_path):
+    # a cold `stickslip demo` (with its --check) in a cache of our own, listening to
+    # numba's compile events in the command's own process: every kernel the compile
+    # steps cover must come from the workers' cache (the steps' made-up lines give the
+    # argument types real inputs give); only the line model's <F> interval kernels
+    # (about 1 s) are left to the run itself
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    listen = (
+        "import sys\n"
+        "from numba.core import event\n"
+        "compiled = []\n"
+        "class L(event.Listener):\n"
+        "    def on_start(self, ev):\n"
+        "        f = ev.data['dispatcher'].py_func\n"
+        "        compiled.append(f.__module__ + '.' + f.__qualname__)\n"
+        "    def on_end(self, ev): pass\n"
+        "event.register('numba:compile', L())\n"
+        "from stickslip.cli.main import main\n"
+        f"sys.argv = ['stickslip', 'demo', '--out', {str(tmp_path / 'demo')!r}]\n"
+        "try:\n"
+        "    main()\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "print('\\n'.join('compiled: ' + c for c in compiled if c.startswith('stickslip')))\n"
+    )  # fmt: skip
+    r = subprocess.run([sys.executable, "-c", listen], env=env, capture_output=True,
+                       text=True, timeout=600)  # fmt: skip
+    assert "6 ok" in r.stderr and "first run after installing" in r.stderr, r.stderr
+    mine = {ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("compiled: ")}
+    assert mine and all(c.startswith("stickslip.estimators.offsets.") for c in mine), mine
+    cached_now = "from stickslip.jobs.infer import kernels_cached; assert kernels_cached(True)"
+    subprocess.run([sys.executable, "-c", cached_now], env=env, check=True, timeout=120)

@@ -95,9 +95,10 @@ def run_estimation(
         with progress_bar(inf.count_inputs(traces), "read", "file") as bar:
             found, errors = inf.read_inputs(traces, opts, progress=bar)
     info(f"estimator: {estimator.describe()}; {len(found)} trace(s) read")
-    if found and not inf.kernels_cached():
+    if found and not inf.kernels_cached(check):
         info("first run after installing: compiling the numerical kernels, once (under a "
              "minute; later runs start in seconds)")  # fmt: skip
+        inf.compile_kernels(check)
     with progress_bar(len(found) if check else 0, "check") as bar:
         result = inf.infer(estimator, found, errors, lattice_nm=lattice,
                            velocity_nm_per_s=velocity, temperature_K=temperature,

@@ -269,6 +269,14 @@ def posterior_predictive_check(
     return PPCResult(gof=gof, flagged=gof > threshold, z=z, replicate_nN=overlay)
 
 
+def warm() -> None:
+    """Compile the simulator kernel the check runs into numba's on-disk cache: one
+    made-up line, checked (a step of :func:`stickslip.compiled.compile_ahead`)."""
+    x = np.arange(256) * 0.02
+    posterior_predictive_check(x, 40.0 * np.mod(x, 0.25)[None], np.array([1.0]),
+                               np.array([10.0]), n_replicates=2)  # fmt: skip
+
+
 def plot_overlay(x_nm, force_nN, replicate_nN, title: str, out) -> None:
     """The trace and, if given, one replicate simulated at its estimate."""
     import matplotlib

@@ -263,6 +263,13 @@ def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
 _NAN = float("nan")
 
 
+def warm() -> None:
+    """Compile :func:`trace_checks`'s kernel into numba's on-disk cache: one made-up
+    sawtooth line (a step of :func:`stickslip.compiled.compile_ahead`)."""
+    x = np.arange(256) * 0.02
+    trace_checks([x], [40.0 * np.mod(x, 0.25)], threads=1)
+
+
 def _value(v: Any) -> float:
     """A row's entry as a float: NaN for missing, non-numeric and boolean entries."""
     if type(v) is float:  # the usual case, first: this runs for every row and column

@@ -22,19 +22,22 @@ from typing import Any
 
 import numpy as np
 
-from stickslip.compiled import cached
+from stickslip.compiled import cached, compile_ahead
 from stickslip.diagnostics.loads import write_load_report
 from stickslip.diagnostics.plots import window_panels
 from stickslip.diagnostics.plots_classical import plot_trace_diagnostics
 from stickslip.diagnostics.ppc import plot_overlay, posterior_predictive_check
+from stickslip.diagnostics.ppc import warm as ppc_warm
 from stickslip.diagnostics.report_html import write_report
 from stickslip.estimators import domain
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.classical.estimator import KERNELS as CLASSICAL_KERNELS
 from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.classical.estimator import warm as classical_warm
 from stickslip.estimators.classical.slips import analyse_trace
 from stickslip.estimators.pairs import add_pair_columns
 from stickslip.estimators.table import OK, VOLT_NAMES, ResultTable, failure_row, has_estimate
+from stickslip.simulators.kernel import KERNELS as SIMULATOR_KERNELS
 from stickslip.traces.readers import collect_traces, expand_paths
 from stickslip.traces.trace import Trace, TraceReadError
 
@@ -112,11 +115,31 @@ class InferResult:
 _DETAIL = re.compile(r"\s*\([^()]*\)")
 
 
-def kernels_cached() -> bool:
-    """Whether the compiled kernels every ``infer`` meets (the verdict's trace checks and
-    the classical estimator) are in numba's on-disk cache already; False on the first
-    run after installing, which compiles them (:mod:`stickslip.compiled`)."""
-    return cached(*domain.KERNELS, *CLASSICAL_KERNELS)
+#: The compiled kernels an ``infer`` meets, each with the step that compiles them ahead
+#: (:func:`stickslip.compiled.compile_ahead`): every run's (the classical estimator, the
+#: longest, and the verdict's trace checks), then the check's simulator.
+COMPILE_STEPS = ((classical_warm, CLASSICAL_KERNELS), (domain.warm, domain.KERNELS))
+CHECK_COMPILE_STEP = (ppc_warm, SIMULATOR_KERNELS)
+
+
+def _compile_steps(check: bool) -> list[tuple[Callable[[], None], tuple]]:
+    return [*COMPILE_STEPS, CHECK_COMPILE_STEP] if check else list(COMPILE_STEPS)
+
+
+def kernels_cached(check: bool = False) -> bool:
+    """Whether the compiled kernels an ``infer`` meets (the verdict's trace checks and
+    the classical estimator; with ``check``, the simulator) are in numba's on-disk cache
+    already; False on the first run after installing, which compiles them
+    (:mod:`stickslip.compiled`)."""
+    return all(cached(*kernels) for _, kernels in _compile_steps(check))
+
+
+def compile_kernels(check: bool = False, processes: int | None = None) -> None:
+    """Compile the kernels of :func:`kernels_cached` that the cache lacks, side by side
+    in worker processes (:func:`stickslip.compiled.compile_ahead`), before a first run
+    calls them one after another: call it where ``kernels_cached`` is False."""
+    compile_ahead([step for step, kernels in _compile_steps(check) if not cached(*kernels)],
+                  processes)  # fmt: skip
 
 
 def read_inputs(paths: Sequence[str | os.PathLike], reader_options: dict[str, Any] | None = None,

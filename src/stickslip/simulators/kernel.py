@@ -311,6 +311,10 @@ def run_blocks(
                 out_F[lo + l, p] = acc[l] * inv_npp
 
 
+#: The compiled kernels behind :func:`integrate_numba` (:func:`stickslip.compiled.cached`).
+KERNELS = (run_blocks,)
+
+
 def integrate_numba(lanes: Lanes, record_fine: bool = False):
     """Run the numba kernel on lanes with a common steps-per-pixel.
 

@@ -91,7 +91,9 @@ def _spread(v: np.ndarray) -> float:
     return mad_sigma(vals) if vals.size > 1 else np.nan
 
 
-@njit(cache=True, error_model="numpy")
+# inlined into its one caller: numba optimises a kernel's LLVM module again with every
+# compiled callee linked in, so a separately compiled wrapper cost 2.6 s of the first run
+@njit(cache=True, error_model="numpy", inline="always")
 def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
                   mass_kg: float, gamma: float, refine: bool, out: np.ndarray) -> None:  # fmt: skip
     events, w, sigma, tol = sl.detect_for_fits(x, F)
@@ -373,6 +375,13 @@ def estimate_array(
          float(damping_per_s), bool(refine), out[i:j])
         for i, j in zip(cuts[:-1], cuts[1:], strict=True)])  # fmt: skip
     return out
+
+
+def warm() -> None:
+    """Compile :func:`estimate_array`'s kernel into numba's on-disk cache: one made-up
+    sawtooth line (a step of :func:`stickslip.compiled.compile_ahead`)."""
+    x = np.arange(256) * 0.02
+    estimate_array(x, [40.0 * np.mod(x, 0.25)], threads=1)
 
 
 def estimate_trace(
