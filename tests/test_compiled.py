@@ -147,3 +147,8 @@ def test_a_first_run_compiles_its_kernels_in_worker_processes(tmp_path):
     assert mine and all(c.startswith("stickslip.estimators.offsets.") for c in mine), mine
     cached_now = "from stickslip.jobs.infer import kernels_cached; assert kernels_cached(True)"
     subprocess.run([sys.executable, "-c", cached_now], env=env, check=True, timeout=120)
+
+
+def test_compile_ahead_without_an_interpreter_to_start_does_nothing(monkeypatch):
+    monkeypatch.setattr(sys, "executable", "")
+    assert compile_ahead(["os:getcwd", "os:getpid"]) == [-1, -1]

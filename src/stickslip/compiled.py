@@ -103,7 +103,8 @@ def compile_ahead(steps: Sequence[Callable[[], object] | str], processes: int | 
     Returns
     -------
     list of int
-        Each step's exit status, in the order given (0: done; -1: timed out).
+        Each step's exit status, in the order given (0: done; -1: timed out, or no
+        worker could start).
     """
     workers = max(1, min(len(steps), processes or os.cpu_count() or 1))
 
@@ -118,7 +119,7 @@ def compile_ahead(steps: Sequence[Callable[[], object] | str], processes: int | 
         except (OSError, subprocess.TimeoutExpired):
             return -1
 
-    if not steps:
-        return []
+    if not steps or not sys.executable:  # an embedded interpreter has no python to run
+        return [-1] * len(steps)
     with ThreadPoolExecutor(workers) as pool:
         return list(pool.map(run, steps))
