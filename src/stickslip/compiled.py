@@ -27,7 +27,7 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["cached", "chunk_bounds", "compile_ahead", "run_chunks"]
+__all__ = ["cached", "chunk_bounds", "compile_ahead", "made_up_line", "run_chunks"]
 
 
 def chunk_bounds(n: int, min_lines: int, threads: int | None = None) -> np.ndarray:
@@ -71,6 +71,13 @@ def cached(*kernels: Any) -> bool:
         if not isinstance(index, str) or not os.path.exists(index):
             return False
     return True
+
+
+def made_up_line() -> tuple[np.ndarray, np.ndarray]:
+    """A sawtooth line, ``x_nm`` and ``force_nN`` (256 samples over 5.1 nm), for a compile
+    step of :func:`compile_ahead` to run its kernels on: its types matter, not its values."""
+    x = np.arange(256) * 0.02
+    return x, 40.0 * np.mod(x, 0.25)
 
 
 #: What a worker process of :func:`compile_ahead` runs: one step, named on its command line.

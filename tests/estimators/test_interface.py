@@ -18,6 +18,7 @@ from stickslip.estimators.table import (
     STD_COLUMNS,
     TARGETS,
     TableFormatError,
+    domain_verdict,
     read_table,
 )
 from stickslip.estimators.window.modelfile import ModelFileError
@@ -102,6 +103,18 @@ def test_table_files_follow_the_extension(traces, tmp_path):
     with pytest.raises(TableFormatError, match=r"\.txt"):
         table.write(tmp_path / "r.txt")
     assert not (tmp_path / "r.txt").exists()
+
+
+def test_the_verdict_reads_the_same_from_memory_and_from_a_file(traces, tmp_path):
+    table = load_estimator(None).predict(traces)
+    in_memory = [domain_verdict(r) for r in table.rows]
+    assert in_memory[-1] is False and all(v is True for v in in_memory[:-1])
+    back = read_table(table.write(tmp_path / "r.csv"))  # "True"/"False" cells
+    assert [domain_verdict(r) for r in back] == in_memory
+    back = json.loads(table.write(tmp_path / "r.json").read_text())  # JSON booleans
+    assert [domain_verdict(r) for r in back] == in_memory
+    # no verdict: an estimator without one, or a missing value
+    assert domain_verdict({"U0_eV": 1.0}) is None and domain_verdict({"in_domain": ""}) is None
 
 
 def test_loading_dispatches_on_the_file(tmp_path):

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stickslip.compiled import made_up_line
 from stickslip.estimators.noise import noise_nN
 from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.kernel import LANES
@@ -272,9 +273,8 @@ def posterior_predictive_check(
 def warm() -> None:
     """Compile the simulator kernel the check runs into numba's on-disk cache: one
     made-up line, checked (a step of :func:`stickslip.compiled.compile_ahead`)."""
-    x = np.arange(256) * 0.02
-    posterior_predictive_check(x, 40.0 * np.mod(x, 0.25)[None], np.array([1.0]),
-                               np.array([10.0]), n_replicates=2)  # fmt: skip
+    x, F = made_up_line()
+    posterior_predictive_check(x, F[None], np.array([1.0]), np.array([10.0]), n_replicates=2)
 
 
 def plot_overlay(x_nm, force_nN, replicate_nN, title: str, out) -> None:

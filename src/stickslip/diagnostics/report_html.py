@@ -42,7 +42,7 @@ import numpy as np
 from stickslip._version import __version__
 from stickslip.atomic import write_text_atomic
 from stickslip.conditions import QUANTITIES
-from stickslip.estimators.table import OK, ResultTable, is_missing
+from stickslip.estimators.table import OK, ResultTable, domain_verdict, is_missing, truthy
 
 MAX_GALLERY = 24
 FIG_DPI = 90
@@ -256,15 +256,15 @@ def _row_infos(table: ResultTable, traces: Sequence[Any]) -> list[_Row]:
     for i, (row, j) in enumerate(zip(table.rows, pairing, strict=True)):
         trace = traces[j] if j is not None else None
         quality = row.get("quality")
-        dom = row.get("in_domain") if "in_domain" in row else None
+        dom = domain_verdict(row)
         out.append(
             _Row(
                 index=i,
                 row=row,
                 trace=trace,
                 refused=trace is not None and quality != OK,
-                ppc=quality == OK and _truthy(row.get("ppc_flag")),
-                out_of_domain=None if is_missing(dom) else not _truthy(dom),
+                ppc=quality == OK and truthy(row.get("ppc_flag")),
+                out_of_domain=None if dom is None else not dom,
             )
         )
     return out
@@ -292,17 +292,6 @@ def _pair(rows: Sequence[Mapping[str, Any]], traces: Sequence[Any]) -> list[int 
         if out[i] is None and free.get(str(r.get("trace"))):
             out[i] = free[str(r.get("trace"))].pop(0)
     return out
-
-
-def _truthy(value: Any) -> bool:
-    if is_missing(value):
-        return False
-    if isinstance(value, str):
-        return value.strip().lower() in ("1", "true", "yes", "y", "t")
-    try:
-        return bool(value)
-    except (TypeError, ValueError):
-        return False
 
 
 def _num(value: Any) -> float:

@@ -87,7 +87,7 @@ import numpy as np
 from numba import njit
 from threadpoolctl import ThreadpoolController
 
-from stickslip.compiled import chunk_bounds, run_chunks
+from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
 from stickslip.robust import median, percentile, select_tails, white_sigma
@@ -266,8 +266,8 @@ _NAN = float("nan")
 def warm() -> None:
     """Compile :func:`trace_checks`'s kernel into numba's on-disk cache: one made-up
     sawtooth line (a step of :func:`stickslip.compiled.compile_ahead`)."""
-    x = np.arange(256) * 0.02
-    trace_checks([x], [40.0 * np.mod(x, 0.25)], threads=1)
+    x, F = made_up_line()
+    trace_checks([x], [F], threads=1)
 
 
 def _value(v: Any) -> float:

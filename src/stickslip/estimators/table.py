@@ -89,6 +89,27 @@ def is_missing(value: Any) -> bool:
     return isinstance(value, (float, np.floating)) and math.isnan(value)
 
 
+def truthy(value: Any) -> bool:
+    """A flag column's value as a bool (a missing one is False); read back from a file,
+    ``"true"``, ``"1"``, ``"yes"`` ... too."""
+    if is_missing(value):
+        return False
+    if isinstance(value, str):
+        return value.strip().lower() in ("1", "true", "yes", "y", "t")
+    try:
+        return bool(value)
+    except (TypeError, ValueError):
+        return False
+
+
+def domain_verdict(row: Mapping[str, Any]) -> bool | None:
+    """A row's in/out-of-domain verdict (``in_domain``): True, False, or None where the
+    row has none (an estimator without the verdict, or a missing value: an empty cell of
+    a table read back from CSV too)."""
+    value = row.get("in_domain")
+    return None if is_missing(value) or value == "" else truthy(value)
+
+
 def has_estimate(row: Mapping[str, Any]) -> bool:
     """True for a row with estimate columns (in nN units or, for volts, in V units)."""
     return "U0_eV" in row or VOLT_NAMES["U0_eV"] in row

@@ -27,6 +27,7 @@ from stickslip.estimators.table import (
     TARGETS,
     ResultTable,
     by_trace,
+    domain_verdict,
     float_or_nan,
     has_estimate,
     read_table,
@@ -75,8 +76,8 @@ class Evaluation:
     def domain(self) -> tuple[int, int] | None:
         """Rows in domain and out of domain among the matched rows with an estimate;
         None for an estimator without the in/out-of-domain verdict."""
-        verdicts = [r.get("in_domain") for r in self.table.rows if has_estimate(r)]
-        if not any(isinstance(v, bool) for v in verdicts):
+        verdicts = [domain_verdict(r) for r in self.table.rows if has_estimate(r)]
+        if all(v is None for v in verdicts):
             return None
         return sum(v is True for v in verdicts), sum(v is False for v in verdicts)
 

@@ -36,7 +36,14 @@ from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.estimator import warm as classical_warm
 from stickslip.estimators.classical.slips import analyse_trace
 from stickslip.estimators.pairs import add_pair_columns
-from stickslip.estimators.table import OK, VOLT_NAMES, ResultTable, failure_row, has_estimate
+from stickslip.estimators.table import (
+    OK,
+    VOLT_NAMES,
+    ResultTable,
+    domain_verdict,
+    failure_row,
+    has_estimate,
+)
 from stickslip.simulators.kernel import KERNELS as SIMULATOR_KERNELS
 from stickslip.traces.readers import collect_traces, expand_paths
 from stickslip.traces.trace import Trace, TraceReadError
@@ -81,7 +88,7 @@ class InferResult:
     def out_of_domain(self) -> list[int]:
         """Rows with an estimate that the in/out-of-domain verdict put out of domain."""
         return [i for i, r in enumerate(self.table.rows)
-                if has_estimate(r) and r.get("in_domain") is False]  # fmt: skip
+                if has_estimate(r) and domain_verdict(r) is False]  # fmt: skip
 
     def domain_lines(self, limit: int = 10) -> list[str]:
         """One line per out-of-domain trace with the verdict's reason, and per file and
@@ -339,7 +346,7 @@ def write_panels(result: InferResult, estimator: Estimator, out_dir: str | os.Pa
                 title += " (95 % intervals)"
             if "gof" in row:
                 title += f", gof = {row['gof']:.2f}{' FLAGGED' if row['ppc_flag'] else ''}"
-            if row.get("in_domain") is False:
+            if domain_verdict(row) is False:
                 title += "\n" + textwrap.fill("OUT OF DOMAIN (intervals widened): "
                                               + str(row.get("domain_reason")), 110)
             plot_overlay(t.x_nm, t.force_nN, result.replicates.get(i), title, path)
@@ -390,7 +397,7 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
              f"{num(r['K_N_m']):>9.2f}+-{pm(r.get('K_N_m_std'))}"
              f"{num(r['eta']):>8.2f}")
         if has_dom:
-            s += f"{DOMAIN_MARK.get(r.get('in_domain'), '-'):>8}"
+            s += f"{DOMAIN_MARK.get(domain_verdict(r), '-'):>8}"
         if "gof" in r:
             s += f"{r['gof']:>5.1f}{'!' if r.get('ppc_flag') else ' '}"
         if has_cl:

@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 import stickslip.estimators.classical.slips as sl
-from stickslip.compiled import chunk_bounds, run_chunks
+from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
@@ -380,8 +380,8 @@ def estimate_array(
 def warm() -> None:
     """Compile :func:`estimate_array`'s kernel into numba's on-disk cache: one made-up
     sawtooth line (a step of :func:`stickslip.compiled.compile_ahead`)."""
-    x = np.arange(256) * 0.02
-    estimate_array(x, [40.0 * np.mod(x, 0.25)], threads=1)
+    x, F = made_up_line()
+    estimate_array(x, [F], threads=1)
 
 
 def estimate_trace(
