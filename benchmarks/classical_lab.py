@@ -36,6 +36,7 @@ import numpy as np
 
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.line.families import draw_family_lines
+from stickslip.estimators.table import domain_verdict
 from stickslip.simulators import effects as fx
 from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing, in_eta_window
 from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
@@ -71,7 +72,7 @@ def score(data: Dataset, estimator: ClassicalEstimator | None = None) -> dict:
     out: dict = {
         "n": len(rows),
         "answered": float(answered.mean()) if rows else np.nan,
-        "in_domain": float(np.mean([bool(r.get("in_domain")) for r in rows])),
+        "in_domain": float(np.mean([domain_verdict(r) is True for r in rows])),
     }
     for key, name in (("K_N_m", "K"), ("U0_eV", "U0")):
         got = np.array([r[key] if a else np.nan for r, a in zip(rows, answered, strict=True)],

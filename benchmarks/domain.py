@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from stickslip.estimators.table import domain_verdict
 from stickslip.simulators import PhysicalSettings, simulate
 from stickslip.simulators import effects as fx
 from stickslip.simulators.bench import BENCH_SEED, BenchConfig, bench_if_missing
@@ -294,8 +295,9 @@ def rates(estimator, sets: dict[str, list[Trace]]) -> dict[str, tuple[float, Cou
     out = {}
     for name, traces in sets.items():
         table = estimator.predict(traces)
-        flags = np.array([bool(r.get("in_domain")) for r in table.rows])
-        reasons = Counter(str(r.get("domain_reason")) for r in table.rows if not r.get("in_domain"))
+        flags = np.array([domain_verdict(r) is True for r in table.rows])
+        reasons = Counter(str(r.get("domain_reason"))
+                          for r, inside in zip(table.rows, flags, strict=True) if not inside)
         out[name] = (float(flags.mean()), reasons)
     return out
 
@@ -328,7 +330,8 @@ def widening_needed(estimator, sets: dict[str, list[Trace]]) -> None:
         estimator.widen_out_of_domain = True
         truth = truth_from_traces(tables[True], traces)
         pairs = [(r, w) for r, w in zip(tables[False].rows, tables[True].rows, strict=True)
-                 if not r.get("in_domain") and r.get("quality") == "ok" and r["trace"] in truth]
+                 if domain_verdict(r) is not True and r.get("quality") == "ok"
+                 and r["trace"] in truth]  # fmt: skip
         if not pairs:
             continue
         cells = []

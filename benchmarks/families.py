@@ -79,7 +79,7 @@ from stickslip.estimators.line.modelfile import (
     save_line_model,
 )
 from stickslip.estimators.pairs import pair_friction, pair_parameters
-from stickslip.estimators.table import TARGETS
+from stickslip.estimators.table import TARGETS, domain_verdict
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.simulators import effects as fx
@@ -109,7 +109,7 @@ def score(estimator: LineEstimator, data: Dataset) -> dict:
     names = [t.name for t, m in zip(traces, ok, strict=True) if m]
     m = evaluate(table, {n: truth[n] for n in names}).metrics
     rows = {r["trace"]: r for r in table.rows}
-    inside = [n for n in names if rows[n].get("in_domain")]
+    inside = [n for n in names if domain_verdict(rows[n]) is True]
     # the rows in domain alone: the out-of-domain rows' intervals are widened on purpose
     m_in = evaluate(table, {n: truth[n] for n in inside}).metrics if inside else None
     return {"n": len(names), "coverage95": {k: m[k]["coverage95"] for k in KEYS},
