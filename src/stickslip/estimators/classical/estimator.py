@@ -2,12 +2,13 @@
 
 The experimentalists' automated algorithm, made robust and physics-consistent:
 
-1. slips and stick segments (:mod:`stickslip.estimators.classical.slips`); on a
-   coarse line that is answered, sticks split at the slips the detection missed
-   (:func:`~stickslip.estimators.classical.slips.split_events`) where that gives an
-   answer with more slips and eta >= 3 (``refine``);
-2. per segment a robust straight-line fit of the rising branch (``k_exp`` is the median
-   over segments) and per slip the peak force, free of pixel averaging;
+1. the line's cycles by one segmentation (:mod:`stickslip.estimators.classical.segmentation`:
+   a piecewise-linear sawtooth on a slow baseline, fitted by penalised least squares),
+   which also gives the regime (fast falls after slow rises, or not) and the baseline,
+   taken off before the sticks are fitted;
+2. per stick a robust straight-line fit of its straight part (``k_exp`` is the median
+   over sticks) and per slip the peak force, free of pixel averaging
+   (:mod:`stickslip.estimators.classical.slips`);
 3. ``F_max`` and ``K`` from the mean peak and the slopes, inverting the PT relations
    along the whole rising branch with the thermal-activation correction of
    :mod:`stickslip.estimators.classical.pt_inversion`; ``U0 = a F_max/pi``,
@@ -16,11 +17,13 @@ The experimentalists' automated algorithm, made robust and physics-consistent:
    during a stick, the regime, and the spread over slips (``*_std``: 1.4826 MAD of the
    per-slip values; for ``F_mean`` the spread of the per-cycle mean force).
 
-Quality flags (``quality``): ``ok``; ``too few slips``; ``smooth sliding`` (no fast
-drops, signal well above noise); ``too noisy`` (no slip stands out of the noise, or the
-noise is a large fraction of the drops); ``inconsistent slopes`` (no positive K fits
-the slopes and the peak); ``sticks disagree`` (the sticks' own K's scatter by more than
-:data:`MAX_K_SPREAD` of the line's K: no one spring fits them).
+Quality flags (``quality``): ``ok``; ``too few slips``; ``smooth sliding`` (the force
+cycles, but falls no faster than it rises: smooth sliding, or a slider that oscillates
+without sticking); ``not stick-slip`` (the force jumps up, as well as or instead of
+down); ``too noisy`` (nothing stands out of the noise, or the noise is a large fraction
+of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak);
+``sticks disagree`` (the sticks' own K's scatter by more than :data:`MAX_K_SPREAD` of
+the line's K: no one spring fits them). Every flag but ``ok`` comes without K.
 """
 
 from __future__ import annotations
@@ -32,12 +35,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+import stickslip.estimators.classical.segmentation as sg
 import stickslip.estimators.classical.slips as sl
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
-from stickslip.robust import mad_sigma, median
+from stickslip.robust import mad_sigma, median, percentile, white_sigma
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
@@ -68,8 +72,9 @@ MAX_K_SPREAD = 0.8
 
 # output fields of the kernel
 (F_MEAN, F_MEAN_STD, U0, U0_STD, K_, K_STD, ETA, ETA_STD, K_EXP, K_EXP_STD, F_PEAK,
- F_PEAK_STD, N_SLIPS, FRAC_MULTIPLE, NOISE, WINDOW, STATUS) = range(17)  # fmt: skip
-N_FIELDS = 17
+ F_PEAK_STD, N_SLIPS, FRAC_MULTIPLE, NOISE, WINDOW, STATUS, R_DOWN,
+ R_UP) = range(19)  # fmt: skip
+N_FIELDS = 19
 
 QUALITY = {
     0: "ok",
@@ -78,11 +83,14 @@ QUALITY = {
     3: "too noisy",
     4: "inconsistent slopes",
     5: "sticks disagree",
+    6: "not stick-slip",
 }
 #: The flag of a line whose slips are stick-slip but whose sticks fit no one spring: a
 #: refusal of K, not a sign that the line is not stick-slip.
 STICKS_DISAGREE = 5
-REGIMES = ("smooth", "single slip", "multiple slip")
+#: The flag of a line whose force jumps up (as well as, or instead of, down).
+NOT_STICK_SLIP = 6
+REGIMES = ("single slip", "multiple slip", "stick-slip", "smooth", "not stick-slip")
 
 
 @njit(cache=True, error_model="numpy")
@@ -95,67 +103,65 @@ def _spread(v: np.ndarray) -> float:
 # compiled callee linked in, so a separately compiled wrapper cost 2.6 s of the first run
 @njit(cache=True, error_model="numpy", inline="always")
 def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
-                  mass_kg: float, gamma: float, refine: bool, out: np.ndarray) -> None:  # fmt: skip
-    events, w, sigma, tol = sl.detect_for_fits(x, F)
-    segs, slp = sl.fit_segments(x, F, events, w, tol)
-    _estimate_core(x, F, segs, slp, w, sigma, a, T, v, mass_kg, gamma, out)
-    if not refine or out[STATUS] != 0:
-        return
-    # Coarse lines: slips the detection missed merge two sticks into one (K at 0.4x on
-    # a multiple-slip line at 10 samples per lattice spacing); the split of such sticks
-    # (slips.split_events) refines a line the detection answers, with more slips. It
-    # answers no line the detection refuses: lines it rescued on the tuning sets (tip
-    # effects, saturation, gain) had K errors of 30 % and more. It looks for sharp
-    # falls between straight sticks: at low eta the branch bends from its start and
-    # the falls it found there gave U0 at half the truth, so it needs eta >= 3 too.
-    # (So it never changes the quality flag: ``refine=False`` gives the same flags.)
-    more = sl.split_events(F, events, w, sigma)
-    if more.shape[0] == events.shape[0]:
-        return  # nothing missed: the same fits
-    segs, slp = sl.fit_segments(x, F, more, w, tol)
-    alt = np.empty_like(out)
-    _estimate_core(x, F, segs, slp, w, sigma, a, T, v, mass_kg, gamma, alt)
-    if alt[STATUS] == 0 and alt[ETA] >= TANGENT_MIN_ETA and alt[N_SLIPS] > out[N_SLIPS]:
-        out[:] = alt
+                  mass_kg: float, gamma: float, out: np.ndarray) -> None:  # fmt: skip
+    tol = white_sigma(F)
+    cycles, block, s_fit = sg.find_cycles(F)
+    # the sticks are fitted on the line less its baseline (zero-mean: <F> is kept)
+    G = F - sg.baseline(x, F, cycles)
+    segs, slp = sl.fit_sticks(x, G, cycles, tol)
+    _estimate_core(x, F, G, segs, slp, cycles, block, s_fit, tol, a, T, v, mass_kg, gamma, out)
 
 
 @njit(cache=True, error_model="numpy")
-def _estimate_core(x: np.ndarray, F: np.ndarray, segs: np.ndarray, slp: np.ndarray, w: int,
-                   sigma: float, a: float, T: float, v: float, mass_kg: float, gamma: float,
+def _estimate_core(x: np.ndarray, F: np.ndarray, G: np.ndarray, segs: np.ndarray,
+                   slp: np.ndarray, cycles: np.ndarray, block: int, s_fit: float, tol: float,
+                   a: float, T: float, v: float, mass_kg: float, gamma: float,
                    out: np.ndarray) -> None:  # fmt: skip
-    """One line's fields from its stick and slip tables (:func:`slips.fit_segments`)."""
+    """One line's fields from its cycles (:func:`segmentation.find_cycles`) and its stick
+    and slip tables (:func:`slips.fit_sticks`, on ``G``, the line less its baseline)."""
     out[:] = np.nan
     out[F_MEAN] = np.mean(F)
     ns = slp.shape[0]
     out[N_SLIPS] = ns
-    out[NOISE] = sigma
-    out[WINDOW] = w
+    # noise per sample: the segmentation's own where it ran on samples, else the
+    # second differences' (a long line with few slips per sample)
+    out[NOISE] = s_fit if block == 1 else tol
+    out[WINDOW] = block
     out[FRAC_MULTIPLE] = 0.0
     if ns == 0:
-        span = sl._force_range(x, F)
-        out[STATUS] = 3 if span < 10.0 * sigma else 2
+        span = percentile(G, 95.0) - percentile(G, 5.0)
+        out[STATUS] = 3 if span < 10.0 * out[NOISE] else 2
+        return
+    r_down, r_up = sg.cycle_ratios(cycles)
+    out[R_DOWN] = r_down
+    out[R_UP] = r_up
+    if r_up >= sg.STICK_RATIO:
+        out[STATUS] = NOT_STICK_SLIP  # the force jumps up (as well as, or not, down)
+        return
+    if not r_down >= sg.STICK_RATIO:
+        out[STATUS] = 2  # rise and fall alike: no sticking
         return
     # spread of the mean force over stick-slip cycles
     if ns >= 2:
         cyc = np.empty(ns - 1)
         for k in range(1, ns):
-            c0 = int(slp[k - 1, sl.SLIP_CENTRE]) + 1
-            c1 = int(slp[k, sl.SLIP_CENTRE]) + 1
-            cyc[k - 1] = np.mean(F[c0:c1])
+            c0 = int(cycles[k - 1, sg.CY_VALLEY])
+            c1 = int(cycles[k, sg.CY_VALLEY])
+            cyc[k - 1] = np.mean(G[c0:c1]) if c1 > c0 else np.nan
         out[F_MEAN_STD] = _spread(cyc)
+    if ns < MIN_SLIPS:
+        out[STATUS] = 1
+        return
+    # a refusal carries no numbers: slopes between slips that noise may have made up
+    if s_fit > NOISE_TO_DROP_MAX * median(cycles[:ns, sg.CY_DROP]):
+        out[STATUS] = 3
+        return
     good = ~np.isnan(slp[:, sl.SLIP_F])
     drops = slp[:, sl.SLIP_F] - slp[:, sl.SLIP_F_AFTER]
     kseg = segs[:, sl.SEG_SLOPE]
     segok = kseg > 0
-    if good.sum() < MIN_SLIPS - 1 or segok.sum() < 2 or ns < MIN_SLIPS:
-        # a force that cycles well above the noise without slips to fit: smooth sliding
-        span = sl._force_range(x, F)
-        smooth = span >= 10.0 * sigma and sl._cycles(x, F) >= 2 * MIN_SLIPS
-        out[STATUS] = 2 if smooth else 1
-        return
-    # a refusal carries no numbers: slopes between slips that noise may have made up
-    if sigma > NOISE_TO_DROP_MAX * median(drops[good]):
-        out[STATUS] = 3
+    if good.sum() < MIN_SLIPS - 1 or segok.sum() < 2:
+        out[STATUS] = 1  # too few slips between sticks long enough to fit
         return
     out[K_EXP] = median(kseg[segok])
     out[K_EXP_STD] = _spread(kseg[segok])
@@ -178,7 +184,14 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, segs: np.ndarray, slp: np.ndarr
     eta = 2.0 * np.pi * Fmax / (a * K)
     tok = segs[:, sl.SEG_TAN_SLOPE] > 0
     nquad = np.sum(segs[:, sl.SEG_NFIT] >= sl.MIN_QUAD_SAMPLES)
-    if eta >= TANGENT_MIN_ETA and tok.sum() >= 2 and tok.sum() > TANGENT_MAJORITY * nquad:
+    # only where the segmentation saw each stick as one straight rise: where it found
+    # the bend, the straight part below it already holds the slope before softening
+    whole = 0
+    for k in range(ns + 1):
+        whole += (cycles[k, sg.CY_SLOPE_LO] == cycles[k, sg.CY_LO]
+                  and cycles[k, sg.CY_SLOPE_HI] == cycles[k, sg.CY_HI])  # fmt: skip
+    if (eta >= TANGENT_MIN_ETA and tok.sum() >= 2 and tok.sum() > TANGENT_MAJORITY * nquad
+            and whole > TANGENT_MAJORITY * (ns + 1)):  # fmt: skip
         kt = segs[tok, sl.SEG_TAN_SLOPE]
         Ft = segs[tok, sl.SEG_TAN_F]
         # the median in slope space: K = 1/(1/k - c) is skewed, so a median of noisy
@@ -233,12 +246,12 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, segs: np.ndarray, slp: np.ndarr
 @njit(cache=True, nogil=True, error_model="numpy")
 def _estimate_batch(xs: np.ndarray, Fs: np.ndarray, offsets: np.ndarray, a: np.ndarray,
                     T: np.ndarray, v: np.ndarray, mass_kg: float, gamma: float,
-                    refine: bool, out: np.ndarray) -> None:  # fmt: skip
+                    out: np.ndarray) -> None:  # fmt: skip
     # serial and without the GIL: estimate_array runs one chunk of lines per thread
     # (stickslip.compiled; a parallel loop here took 11 s more to compile)
     for i in range(offsets.size - 1):
         lo, hi = offsets[i], offsets[i + 1]
-        _estimate_one(xs[lo:hi], Fs[lo:hi], a[i], T[i], v[i], mass_kg, gamma, refine, out[i])
+        _estimate_one(xs[lo:hi], Fs[lo:hi], a[i], T[i], v[i], mass_kg, gamma, out[i])
 
 
 #: Lines per thread below which :func:`estimate_array` stays on one thread (a line
@@ -282,10 +295,19 @@ class ClassicalEstimate:
 
 
 def _regime(row: np.ndarray) -> str:
-    if int(row[STATUS]) == 2 or row[N_SLIPS] == 0:
-        return "smooth" if int(row[STATUS]) == 2 else ""
-    if int(row[STATUS]) != 0:
+    """The regime the line's cycles show: ``single slip`` or ``multiple slip`` (answered),
+    ``stick-slip`` (slips, but K refused), ``smooth`` (no sticking: rise and fall alike,
+    smooth sliding or an oscillating slider), ``not stick-slip`` (jumps up, or no
+    cycles standing out of the noise), or ``""`` (too few cycles to tell)."""
+    status = int(row[STATUS])
+    if status == 2:
+        return "smooth"
+    if status in (NOT_STICK_SLIP, 3, 4):  # 4: no spring and peak fit the falls
+        return "not stick-slip"
+    if status == 1:
         return ""
+    if status != 0:
+        return "stick-slip"
     # multiple slip when most slips jump two or more lattice spacings
     return "multiple slip" if row[FRAC_MULTIPLE] > 0.5 else "single slip"
 
@@ -322,7 +344,6 @@ def estimate_array(
     velocity_nm_per_s: float | np.ndarray = 60.0,
     mass_kg: float = PAPER_MASS_KG,
     damping_per_s: float = PAPER_DAMPING_PER_S,
-    refine: bool = True,
     threads: int | None = None,
 ) -> np.ndarray:
     """Vectorised core: the raw field table (one row per trace) of many traces.
@@ -337,10 +358,6 @@ def estimate_array(
         Lattice spacing, temperature and scan velocity used by the inversion.
     mass_kg, damping_per_s : float
         Mass and damping of the thermal-activation prefactor (paper preset).
-    refine : bool
-        Split the sticks of coarse lines at slips the detection missed
-        (:func:`slips.split_events`). It changes the numbers of answered lines only,
-        never the ``STATUS`` column: without it, the flags come faster.
     threads : int, optional
         Chunks of lines estimated at once, each on its own thread (default: numba's
         thread count, ``NUMBA_NUM_THREADS``; :data:`MIN_LINES_PER_THREAD` lines each
@@ -372,7 +389,7 @@ def estimate_array(
     cuts = chunk_bounds(n, MIN_LINES_PER_THREAD, threads)
     run_chunks(_estimate_batch, [
         (xcat, Fcat, offsets[i:j + 1], a[i:j], T[i:j], v[i:j], float(mass_kg),
-         float(damping_per_s), bool(refine), out[i:j])
+         float(damping_per_s), out[i:j])
         for i, j in zip(cuts[:-1], cuts[1:], strict=True)])  # fmt: skip
     return out
 

@@ -151,11 +151,10 @@ class LineEstimator(TraceEstimator):
         # the lower one: it errs towards "smooth sliding". On the verdict's smooth, clean
         # and family sets of seeds 1 and 2 (1,200 lines) it set the thermal inversion's
         # flag on all but one (there "sticks disagree" instead of "inconsistent slopes").
-        # (at T = 0 the scan velocity enters nothing: only the thermal model reads it;
-        # the coarse-line refinement changes answered lines' numbers, never the flag)
+        # (at T = 0 the scan velocity enters nothing: only the thermal model reads it)
         table = estimate_array([traces[i].x_nm for i in low], [traces[i].force_nN for i in low],
                                np.array([conditions[i].lattice_nm for i in low]),
-                               temperature_K=0.0, refine=False)  # fmt: skip
+                               temperature_K=0.0)  # fmt: skip
         for i, status in zip(low, table[:, STATUS].astype(int), strict=True):
             # sticks that fit no one spring refuse K, but the slips are stick-slip
             if QUALITY[status] != OK and status != STICKS_DISAGREE:

@@ -1,0 +1,574 @@
+"""Stick-slip segmentation: one recording as a piecewise-linear sawtooth on a slow baseline.
+
+The model
+    ``F_i = B(x_i) + S_i + e_i``: a sawtooth ``S`` whose sticks rise linearly and whose
+    slips are falls (sudden, or lasting some samples), a slowly varying baseline ``B``
+    (topography, drift), and noise ``e`` with occasional spikes.
+
+The fit
+    1. **Segmentation.** The line is cut into straight segments by penalised least
+       squares: the cut points minimise ``sum_j RSS_j / sigma^2 + beta (segments)``,
+       found exactly by PELT (Killick, Fearnhead and Eckley 2012) with O(1) segment
+       costs from prefix sums. ``sigma`` is the white-noise level of the line's own
+       second differences (MAD), re-estimated once from the fit's residuals where they
+       show more (correlated noise); ``beta = 3 ln n``, the BIC price of a segment's
+       three parameters (start, level, slope). Segments of at most two samples have no
+       residual, so they carry no evidence of a line: where the neighbours on either
+       side meet without a gap, such a segment is a spike and drops out.
+    2. **Sticks and slips.** The fitted polyline (its segment ends and the jumps
+       between segments) is read as rises and falls with a hysteresis of ``sqrt(beta)
+       sigma``, the step whose squared size the penalty prices, so that the kinks of a
+       curved stick, or noise, make no slip. A stick is a rise from a valley
+       to the next peak, a slip the fall from a peak to the next valley.
+    3. **The regime.** Stick-slip means sticks that rise slowly and slips that fall
+       fast. Per cycle, ``R_down`` is the mean fall rate of the slip over the mean rise
+       rate of the stick before it, and ``R_up`` the mean rise rate over the mean fall
+       rate; a slip inside one sample interval is averaged over two, so a fall (rise)
+       counts one interval less than it spans. A sawtooth has ``R_down`` about the
+       samples per slip and ``R_up`` about 1 or less; a sine has both about 1; a
+       reversed sawtooth only a large ``R_up``. Stick-slip needs the median ``R_down >=
+       2.5`` and ``R_up < 2.5`` (:data:`STICK_RATIO`), between a sine's 1 and the 3 of
+       a sawtooth of five samples per slip, so that an oscillating slider that never
+       sticks, or PT smooth sliding, is not read as sticks. Neither large: rise and fall alike (smooth sliding,
+       oscillation); ``R_up`` large: the force jumps up (not stick-slip).
+    4. **The baseline.** Stationary stick-slip has the same mean force in every cycle;
+       a trend of the per-cycle means is the baseline. It is a polynomial in ``x``
+       whose degree (0 to 5) minimises the BIC of the cycle means, and its slope is
+       taken off the sticks (a baseline rising by one drop per cycle would add the
+       whole stick slope again).
+    5. **Long lines.** The segmentation runs on block means of ``b`` samples, with
+       ``b`` chosen from the line itself: the finest blocks at which a window of
+       :data:`WINDOW` blocks shows several cycles, then coarsened to about
+       :data:`BLOCKS_PER_CYCLE` blocks per cycle. PELT runs on overlapping windows of
+       :data:`WINDOW` blocks, so its cost stays linear in the line's length.
+
+Nothing here carries a scale in samples, nm or seconds: the noise sets the penalty,
+the cycles set the resolution, and the ratios of the regime test are pure numbers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from stickslip.robust import mad_sigma, median, white_sigma
+
+#: Blocks per PELT window (the cost of a window is at most WINDOW^2 segment costs).
+WINDOW = 2048
+#: Cycles a window must show for its block size to resolve the sawtooth.
+MIN_WINDOW_CYCLES = 8
+#: Blocks per cycle the segmentation of a long line aims at.
+BLOCKS_PER_CYCLE = 32
+#: Above this median ratio of the mean fall (rise) rate to the mean rise (fall) rate a
+#: line's slips (upward jumps) are fast: a sine has about 1 both ways.
+STICK_RATIO = 2.5
+#: Highest degree of the baseline polynomial.
+MAX_BASELINE_DEGREE = 5
+#: Passes of the noise level from the fit's own residuals (step 1).
+MAX_NOISE_ITERATIONS = 4
+#: Segment price in units of ln(n): start, level and slope (BIC).
+PARAMS_PER_SEGMENT = 3.0
+
+# columns of the cycle table returned by `find_cycles`
+(CY_LO, CY_HI, CY_SLOPE_LO, CY_SLOPE_HI, CY_PEAK, CY_VALLEY, CY_DROP, CY_R_DOWN,
+ CY_R_UP) = range(9)  # fmt: skip
+N_CY_COLS = 9
+
+
+@njit(cache=True, error_model="numpy")
+def _prefix(y: np.ndarray) -> np.ndarray:
+    """Prefix sums of ``y``, ``i y`` and ``y^2`` (rows 0-2, length ``n + 1``)."""
+    n = y.size
+    P = np.zeros((3, n + 1))
+    for i in range(n):
+        P[0, i + 1] = P[0, i] + y[i]
+        P[1, i + 1] = P[1, i] + i * y[i]
+        P[2, i + 1] = P[2, i] + y[i] * y[i]
+    return P
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _line(P: np.ndarray, s: int, t: int) -> tuple[float, float, float]:
+    """Least-squares line through samples ``s..t-1``: (RSS, slope, value at the middle)."""
+    L = t - s
+    sy = P[0, t] - P[0, s]
+    if L < 3:
+        if L == 2:
+            syy = P[2, t] - P[2, s]
+            siy = P[1, t] - P[1, s]
+            c = s + 0.5
+            return 0.0, 2.0 * (siy - c * sy), 0.5 * sy
+        return 0.0, 0.0, sy
+    siy = P[1, t] - P[1, s]
+    syy = P[2, t] - P[2, s]
+    c = 0.5 * (s + t - 1)
+    sxy = siy - c * sy
+    sxx = L * (L * L - 1.0) / 12.0
+    slope = sxy / sxx
+    rss = syy - sy * sy / L - sxy * slope
+    return max(rss, 0.0), slope, sy / L
+
+
+@njit(cache=True, error_model="numpy")
+def _pelt(P: np.ndarray, lo: int, hi: int, beta: float, starts: np.ndarray) -> int:
+    """Exact penalised segmentation of ``lo..hi-1`` (PELT); segment starts into ``starts``."""
+    n = hi - lo
+    cost = np.empty(n + 1)
+    last = np.empty(n + 1, dtype=np.int64)
+    cands = np.empty(n + 1, dtype=np.int64)
+    vals = np.empty(n + 1)
+    cost[0] = -beta
+    cands[0] = 0
+    nc = 1
+    for t in range(1, n + 1):
+        best = np.inf
+        arg = 0
+        for j in range(nc):
+            s = cands[j]
+            v = cost[s] + _line(P, lo + s, lo + t)[0] + beta
+            vals[j] = v
+            if v < best:
+                best = v
+                arg = s
+        cost[t] = best
+        last[t] = arg
+        k = 0
+        for j in range(nc):  # prune the starts that can never win again
+            if vals[j] - beta <= best:
+                cands[k] = cands[j]
+                k += 1
+        cands[k] = t
+        nc = k + 1
+    m = 0
+    t = n
+    while t > 0:
+        starts[m] = lo + last[t]
+        m += 1
+        t = last[t]
+    starts[:m] = starts[:m][::-1].copy()
+    return m
+
+
+@njit(cache=True, error_model="numpy")
+def _segment(y: np.ndarray, beta: float) -> np.ndarray:
+    """Segment starts of ``y`` (sorted, first 0), PELT on overlapping windows."""
+    n = y.size
+    P = _prefix(y)
+    out = np.empty(n + 1, dtype=np.int64)
+    buf = np.empty(WINDOW + 1, dtype=np.int64)
+    m = 0
+    lo = 0
+    while True:
+        hi = min(n, lo + WINDOW)
+        k = _pelt(P, lo, hi, beta, buf)
+        if hi == n:
+            for j in range(k):
+                out[m] = buf[j]
+                m += 1
+            break
+        # keep the cuts of the window's first three quarters; the next window starts
+        # at the last of them, so no cut depends on where a window ended
+        keep_to = lo + (3 * WINDOW) // 4
+        nxt = lo
+        for j in range(k):
+            if buf[j] <= keep_to:
+                out[m] = buf[j]
+                m += 1
+                nxt = buf[j]
+        if nxt == lo:  # one segment longer than the window: cut it (the polyline merges it)
+            nxt = keep_to
+        else:
+            m -= 1  # the next window starts at this cut and puts it back
+        lo = nxt
+    return out[:m]
+
+
+@njit(cache=True, error_model="numpy")
+def _block_means(F: np.ndarray, b: int) -> np.ndarray:
+    m = F.size // b
+    y = np.empty(m)
+    for j in range(m):
+        y[j] = np.mean(F[j * b : (j + 1) * b])
+    return y
+
+
+@njit(cache=True, error_model="numpy")
+def _polyline(y: np.ndarray, starts: np.ndarray, sigma: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Vertices of the fitted polyline: index, value, and the slope of the piece
+    that ends there (NaN for a jump), with spikes (segments of at most two samples
+    whose neighbours meet without a gap) left out."""
+    n = y.size
+    P = _prefix(y)
+    m = starts.size
+    ends = np.empty(m, dtype=np.int64)
+    ends[:-1] = starts[1:]
+    ends[-1] = n
+    slope = np.empty(m)
+    mid = np.empty(m)
+    for j in range(m):
+        _, slope[j], mid[j] = _line(P, starts[j], ends[j])
+    gap_tol = np.sqrt(2.0 * PARAMS_PER_SEGMENT * np.log(max(n, 3))) * sigma
+    keep = np.ones(m, dtype=np.bool_)
+    for j in range(1, m - 1):
+        if ends[j] - starts[j] > 2:
+            continue
+        a, c = j - 1, j + 1
+        xa = 0.5 * (starts[a] + ends[a] - 1)
+        xc = 0.5 * (starts[c] + ends[c] - 1)
+        left = mid[a] + slope[a] * (starts[c] - xa)  # left line carried to the right's start
+        right = mid[c]
+        right = right + slope[c] * (starts[c] - xc)
+        if abs(left - right) < gap_tol:
+            keep[j] = False
+    # spikes at the ends: a short first or last segment is judged by its one neighbour
+    vi = np.empty(2 * m, dtype=np.int64)
+    vv = np.empty(2 * m)
+    vs = np.empty(2 * m)
+    k = 0
+    for j in range(m):
+        if not keep[j]:
+            continue
+        c = 0.5 * (starts[j] + ends[j] - 1)
+        i0, i1 = starts[j], ends[j] - 1
+        vi[k] = i0
+        vv[k] = mid[j] + slope[j] * (i0 - c)
+        vs[k] = np.nan  # reached by a jump from the previous vertex
+        k += 1
+        if i1 > i0:
+            vi[k] = i1
+            vv[k] = mid[j] + slope[j] * (i1 - c)
+            vs[k] = slope[j]
+            k += 1
+    return vi[:k], vv[:k], vs[:k]
+
+
+@njit(cache=True, error_model="numpy")
+def _turns(vv: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Alternating extrema of the polyline with hysteresis ``delta``: vertex indices of
+    the peaks and valleys, and +1/-1 for each (a zigzag)."""
+    k = vv.size
+    idx = np.empty(k, dtype=np.int64)
+    kind = np.empty(k, dtype=np.int64)
+    m = 0
+    if k == 0:
+        return idx[:0], kind[:0]
+    hi_j = 0
+    lo_j = 0
+    state = 0  # 0: undecided, 1: rising (tracking a peak), -1: falling (tracking a valley)
+    for j in range(1, k):
+        v = vv[j]
+        if state == 0:
+            if v > vv[hi_j]:
+                hi_j = j
+            if v < vv[lo_j]:
+                lo_j = j
+            if vv[hi_j] - vv[lo_j] >= delta:
+                if hi_j > lo_j:  # went up first: the valley is a turn, now rising
+                    idx[m] = lo_j
+                    kind[m] = -1
+                    m += 1
+                    state = 1
+                else:
+                    idx[m] = hi_j
+                    kind[m] = 1
+                    m += 1
+                    state = -1
+        elif state == 1:
+            if v > vv[hi_j]:
+                hi_j = j
+            elif vv[hi_j] - v >= delta:
+                idx[m] = hi_j
+                kind[m] = 1
+                m += 1
+                state = -1
+                lo_j = j
+        else:
+            if v < vv[lo_j]:
+                lo_j = j
+            elif v - vv[lo_j] >= delta:
+                idx[m] = lo_j
+                kind[m] = -1
+                m += 1
+                state = 1
+                hi_j = j
+    return idx[:m], kind[:m]
+
+
+@njit(cache=True, error_model="numpy")
+def _steepest(vi: np.ndarray, vv: np.ndarray, a: int, b: int, sign: float) -> float:
+    """Steepest fall (``sign`` -1) or rise (+1) per sample of one piece between vertices
+    ``a..b`` (a segment, or a jump between two)."""
+    best = 0.0
+    for j in range(a + 1, b + 1):
+        d = vi[j] - vi[j - 1]
+        if d > 0:
+            best = max(best, sign * (vv[j] - vv[j - 1]) / d)
+    return best
+
+
+@njit(cache=True, error_model="numpy")
+def _linear_part(vi: np.ndarray, vv: np.ndarray, vs: np.ndarray, a: int, b: int,
+                 sigma: float) -> tuple[int, int]:  # fmt: skip
+    """The stick's straight part between vertices a (valley) and b (peak): its lowest
+    segment of at least three samples, continued through the next segments while their
+    slopes agree with it within three standard errors (a rounded top, where the slip
+    has begun, bends away and is left out). Returns sample indices (first, last)."""
+    # segments inside the rise: vertex pairs (j - 1, j) with a slope (not a jump)
+    first = -1
+    for j in range(a + 1, b + 1):
+        if not np.isnan(vs[j]) and vi[j] - vi[j - 1] >= 2:
+            first = j
+            break
+    if first < 0:
+        return vi[a], vi[b]
+    lo = vi[first - 1]
+    hi = vi[first]
+    s = vs[first]
+    L = hi - lo + 1.0
+    se = sigma * np.sqrt(12.0 / (L * (L * L - 1.0)))
+    for j in range(first + 1, b + 1):
+        if np.isnan(vs[j]):
+            # a jump: only a small one (inside the noise) continues the stick
+            if abs(vv[j] - (vv[j - 1] + s * (vi[j] - vi[j - 1]))) > 3.0 * sigma:
+                break
+            continue
+        Lj = vi[j] - vi[j - 1] + 1.0
+        sej = sigma * np.sqrt(12.0 / (Lj * (Lj * Lj - 1.0))) if Lj > 2 else np.inf
+        if abs(vs[j] - s) > 3.0 * np.sqrt(se * se + sej * sej):
+            break
+        # merged slope: the length-weighted mean of the two
+        s = (s * L + vs[j] * Lj) / (L + Lj)
+        L = vi[j] - lo + 1.0
+        se = sigma * np.sqrt(12.0 / (L * (L * L - 1.0)))
+        hi = vi[j]
+    return lo, hi
+
+
+@njit(cache=True, error_model="numpy")
+def choose_block(F: np.ndarray) -> int:
+    """Samples per block for the segmentation of ``F`` (1 for lines up to a window)."""
+    n = F.size
+    b = 1
+    while n // b > WINDOW:
+        y = _block_means(F[: b * WINDOW], b)
+        s = max(white_sigma(y), 1e-300)
+        z = y / s
+        beta = PARAMS_PER_SEGMENT * np.log(WINDOW)
+        starts = _segment(z, beta)
+        _, vv, _ = _polyline(z, starts, 1.0)
+        tk, kind = _turns(vv, np.sqrt(beta))
+        nfall = 0
+        for j in range(tk.size):
+            if kind[j] == 1:
+                nfall += 1
+        if nfall >= MIN_WINDOW_CYCLES:
+            per_cycle = b * WINDOW / nfall  # samples per cycle
+            return max(1, int(per_cycle // BLOCKS_PER_CYCLE))
+        b *= 4
+    return b
+
+
+@njit(cache=True, error_model="numpy")
+def _residual_sigma(y: np.ndarray, starts: np.ndarray) -> float:
+    """Robust noise level of the segmentation's residuals (segments of three samples or
+    more: shorter ones fit exactly and say nothing of the noise)."""
+    n = y.size
+    P = _prefix(y)
+    res = np.empty(n)
+    k = 0
+    for j in range(starts.size):
+        t = starts[j + 1] if j + 1 < starts.size else n
+        L = t - starts[j]
+        if L < 3:
+            continue
+        _, sl, md = _line(P, starts[j], t)
+        c = 0.5 * (starts[j] + t - 1)
+        corr = np.sqrt(L / (L - 2.0))  # a fitted line leaves two degrees of freedom fewer
+        for i in range(starts[j], t):
+            res[k] = (y[i] - (md + sl * (i - c))) * corr
+            k += 1
+    return mad_sigma(res[:k]) if k >= 8 else np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def find_cycles(F: np.ndarray) -> tuple[np.ndarray, int, float]:
+    """Sticks and slips of one line (the module docstring's steps 1-3, 5).
+
+    Parameters
+    ----------
+    F : ndarray (n,)
+        Force samples (any unit).
+
+    Returns
+    -------
+    cycles : ndarray (m + 1, N_CY_COLS)
+        One row per stick that ends in a slip (``m`` slips): the stick's samples
+        ``CY_LO..CY_HI``, its straight part ``CY_SLOPE_LO..CY_SLOPE_HI``, the slip's
+        peak and valley samples, the drop, and the cycle's ``R_down`` and ``R_up``; then
+        the line's final stick (no slip after it: ``CY_PEAK`` -1).
+    block : int
+        Samples per block of the segmentation.
+    sigma : float
+        The noise level (per block mean, in F's unit) the segmentation used.
+    """
+    n = F.size
+    if n < 4:
+        out = np.full((1, N_CY_COLS), np.nan)
+        out[0, CY_LO], out[0, CY_HI], out[0, CY_PEAK] = 0, max(n - 1, 0), -1
+        out[0, CY_SLOPE_LO], out[0, CY_SLOPE_HI] = 0, max(n - 1, 0)
+        return out, 1, 0.0
+    b = choose_block(F)
+    y = _block_means(F, b) if b > 1 else F.copy()
+    nb = y.size
+    # start from below: the second differences count the slips of a coarse line as
+    # noise, the first differences (most of them on sticks) less so; the residuals'
+    # noise then settles where the segmentation explains the line
+    d1 = y[1:] - y[:-1]
+    s = min(white_sigma(y), mad_sigma(d1) / np.sqrt(2.0))
+    if not s > 0:  # a noiseless or digitised line: any tiny scale keeps the costs finite
+        s = max(1e-9 * (np.max(np.abs(y)) - np.min(np.abs(y))), 1e-300)
+    beta = PARAMS_PER_SEGMENT * np.log(max(nb, 3))
+    starts = _segment(y / s, beta)
+    # the model's own noise: the fit's residuals, where they disagree with the second
+    # differences (correlated noise shows more; slips at a few samples each inflate
+    # the second differences)
+    for _ in range(MAX_NOISE_ITERATIONS):
+        s_res = _residual_sigma(y, starts)
+        if not s_res > 0 or abs(s_res / s - 1.0) < 0.1:
+            break
+        s = s_res
+        starts = _segment(y / s, beta)
+    vi, vv, vs = _polyline(y, starts, s)
+    tk, kind = _turns(vv, np.sqrt(beta) * s)
+    # cycles: valley -> peak (stick) -> valley (slip)
+    out = np.full((tk.size + 1, N_CY_COLS), np.nan)
+    m = 0
+    v0 = 0  # the first stick starts at the line's start
+    for j in range(tk.size):
+        if kind[j] != 1:
+            v0 = tk[j]
+            continue
+        p = tk[j]
+        nxt = tk[j + 1] if j + 1 < tk.size else vi.size - 1
+        if nxt <= p:
+            continue
+        lo_v = v0
+        rise = vv[p] - vv[lo_v]
+        rise_len = vi[p] - vi[lo_v]
+        fall = vv[p] - vv[nxt]
+        fall_len = vi[nxt] - vi[p]
+        sl_lo, sl_hi = _linear_part(vi, vv, vs, lo_v, p, s)
+        out[m, CY_LO] = vi[lo_v]
+        out[m, CY_HI] = vi[p]
+        out[m, CY_SLOPE_LO] = sl_lo
+        out[m, CY_SLOPE_HI] = sl_hi
+        out[m, CY_PEAK] = vi[p]
+        out[m, CY_VALLEY] = vi[nxt]
+        out[m, CY_DROP] = fall
+        # mean rates; a slip inside a sample interval is averaged over two of them,
+        # so a fall (rise) is one interval shorter than it looks
+        # or, where the detector's response trails after a slip, the steepest piece
+        if rise_len > 0 and rise > 0 and fall > 0:
+            f_rate = max(fall / max(fall_len - 1, 1), _steepest(vi, vv, p, nxt, -1.0))
+            r_rate = max(rise / max(rise_len - 1, 1), _steepest(vi, vv, lo_v, p, 1.0))
+            out[m, CY_R_DOWN] = f_rate / (rise / rise_len)
+            out[m, CY_R_UP] = r_rate / (fall / fall_len)
+        m += 1
+        v0 = nxt
+    # the final stick, after the last slip
+    out[m, CY_LO] = vi[v0]
+    out[m, CY_HI] = vi[vi.size - 1]
+    sl_lo, sl_hi = _linear_part(vi, vv, vs, v0, vi.size - 1, s)
+    out[m, CY_SLOPE_LO] = sl_lo
+    out[m, CY_SLOPE_HI] = sl_hi
+    out[m, CY_PEAK] = -1
+    m += 1
+    out = out[:m].copy()
+    if b > 1:  # block indices to samples, the blocks that hold a slip left out
+        for r in range(m):
+            for c in (CY_LO, CY_SLOPE_LO):
+                out[r, c] = (out[r, c] + 1) * b if out[r, c] > 0 else 0
+            for c in (CY_HI, CY_SLOPE_HI):
+                out[r, c] = min(out[r, c] * b - 1, n - 1) if r < m - 1 else n - 1
+            if out[r, CY_PEAK] >= 0:
+                out[r, CY_PEAK] = out[r, CY_PEAK] * b + b // 2
+                out[r, CY_VALLEY] = out[r, CY_VALLEY] * b + b // 2
+    return out, b, s
+
+
+@njit(cache=True, error_model="numpy")
+def _weighted_median(v: np.ndarray, w: np.ndarray) -> float:
+    ok = ~np.isnan(v) & (w > 0)
+    v, w = v[ok], w[ok]
+    if v.size == 0:
+        return np.nan
+    order = np.argsort(v)
+    half = 0.5 * np.sum(w)
+    acc = 0.0
+    for j in order:
+        acc += w[j]
+        if acc >= half:
+            return v[j]
+    return v[order[-1]]
+
+
+@njit(cache=True, error_model="numpy")
+def cycle_ratios(cycles: np.ndarray) -> tuple[float, float]:
+    """Median ``R_down`` and ``R_up`` over a line's cycles, each cycle weighted by its
+    drop (a small cycle, near the noise, says less of the regime); NaN without cycles."""
+    m = cycles.shape[0] - 1
+    if m <= 0:
+        return np.nan, np.nan
+    w = cycles[:m, CY_DROP]
+    return (_weighted_median(cycles[:m, CY_R_DOWN], w),
+            _weighted_median(cycles[:m, CY_R_UP], w))  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def baseline(x: np.ndarray, F: np.ndarray, cycles: np.ndarray) -> np.ndarray:
+    """The slow baseline under the sawtooth (the module docstring's step 4), zero-mean
+    over the line: a polynomial in ``x`` through the per-cycle mean forces, of the
+    degree (0 to :data:`MAX_BASELINE_DEGREE`) that minimises their BIC."""
+    n = F.size
+    m = cycles.shape[0] - 1  # complete cycles: valley to valley
+    B = np.zeros(n)
+    if m < 4:
+        return B
+    xc = np.empty(m)
+    fc = np.empty(m)
+    k = 0
+    for r in range(1, m):  # from one slip's valley to the next
+        lo = int(cycles[r - 1, CY_VALLEY])
+        hi = int(cycles[r, CY_VALLEY])
+        if hi - lo >= 2:
+            xc[k] = np.mean(x[lo:hi])
+            fc[k] = np.mean(F[lo:hi])
+            k += 1
+    if k < 4:
+        return B
+    xc = xc[:k]
+    fc = fc[:k]
+    x0 = 0.5 * (x[0] + x[n - 1])
+    hw = max(0.5 * (x[n - 1] - x[0]), 1e-300)
+    u = (xc - x0) / hw
+    best_bic = np.inf
+    best_c = np.zeros(1)
+    dmax = min(MAX_BASELINE_DEGREE, k // 4)
+    for d in range(dmax + 1):
+        A = np.empty((k, d + 1))
+        for j in range(d + 1):
+            A[:, j] = u**j
+        c = np.linalg.lstsq(A, fc)[0]
+        r = fc - A @ c
+        rss = np.sum(r * r)
+        bic = k * np.log(max(rss / k, 1e-300)) + (d + 1) * np.log(k)
+        if bic < best_bic:
+            best_bic = bic
+            best_c = c
+    if best_c.size == 1:
+        return B
+    uu = (x - x0) / hw
+    for j in range(1, best_c.size):
+        B += best_c[j] * uu**j
+    return B - np.mean(B)
