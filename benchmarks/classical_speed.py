@@ -28,7 +28,8 @@ from stickslip.estimators.classical import estimate_array
 from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.simulate import simulate
 
-MACRO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "macro-stickslip" / "k1002Nm_v42.mat"
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+MACRO = SHARED_DATA / "macro-stickslip" / "k1002Nm_v42.mat"
 
 
 def best_time(fn, repeat: int) -> float:

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from stickslip.estimators.classical import estimate_array, estimate_trace
-from stickslip.estimators.classical import estimator as E
+from stickslip.estimators.classical import estimate_trace
 from stickslip.estimators.classical.segmentation import CY_DROP, find_cycles
 from stickslip.estimators.mapping import resample_to_pixel
 from stickslip.simulators.config import PhysicalSettings

@@ -29,8 +29,9 @@ The fit
        reversed sawtooth only a large ``R_up``. Stick-slip needs the median ``R_down >=
        2.5`` and ``R_up < 2.5`` (:data:`STICK_RATIO`), between a sine's 1 and the 3 of
        a sawtooth of five samples per slip, so that an oscillating slider that never
-       sticks, or PT smooth sliding, is not read as sticks. Neither large: rise and fall alike (smooth sliding,
-       oscillation); ``R_up`` large: the force jumps up (not stick-slip).
+       sticks, or PT smooth sliding, is not read as sticks. Neither large: rise and
+       fall alike (smooth sliding, oscillation); ``R_up`` large: the force jumps up
+       (not stick-slip).
     4. **The baseline.** Stationary stick-slip has the same mean force in every cycle;
        a trend of the per-cycle means is the baseline. It is a polynomial in ``x``
        whose degree (0 to 5) minimises the BIC of the cycle means, and its slope is
@@ -51,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from stickslip.robust import mad_sigma, median, white_sigma
+from stickslip.robust import mad_sigma, white_sigma
 
 #: Blocks per PELT window (the cost of a window is at most WINDOW^2 segment costs).
 WINDOW = 2048
