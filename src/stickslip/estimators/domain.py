@@ -15,19 +15,18 @@ Every estimator's :meth:`~stickslip.estimators.base.TraceEstimator.predict` ends
     by ``"; "`` (``"no estimate: <quality>"`` for rows without an estimate).
 
 The checks. The first four read the trace itself (:func:`trace_checks`, a compiled
-kernel: about 12 us per 512-pixel line on one core, chunks of lines on numba's threads) and the
-row's estimate, so they hold for every estimator:
+kernel: the classical estimator's segmentation of the line into sticks and slips,
+:mod:`stickslip.estimators.segmentation`; chunks of lines on numba's threads)
+and the row's estimate, so they hold for every estimator:
 
-1. slips: at least :data:`MIN_SLIPS` sudden drops (a run of pixel differences below
-   ``-max(3 sqrt(2) sigma, 2 median|dF|)`` adding up to at least a quarter of the line's
-   force range and 6 sigma, ``sigma`` the white noise from second differences) --
-   ``"no stick-slip: slips not found"`` (``"flat line: ..."`` when the force does not
-   vary beyond the noise);
-2. direction: sudden rises (the same test upwards) at most :data:`MAX_RISE_FRACTION`
-   of the drops. Stick-slip rises slowly and drops fast; a sawtooth that does the
-   opposite is ``"sawtooth reversed"`` (a retrace read without its sign flip, a trace
-   read backwards), and jumps both ways (a square wave, telegraph noise) are
-   ``"jumps up as well as down"``;
+1. slips: at least :data:`MIN_SLIPS` cycles whose fall is fast against the stick's
+   rise (``R_down >= STICK_RATIO`` of the segmentation) -- ``"no stick-slip: slips
+   not found"`` (``"flat line: ..."`` when the force does not vary beyond the noise);
+2. direction: cycles whose rise is a sudden jump (``R_up >= STICK_RATIO``) at most
+   :data:`MAX_RISE_FRACTION` of the slips. Stick-slip rises slowly and drops fast; a
+   sawtooth that does the opposite is ``"sawtooth reversed"`` (a retrace read without
+   its sign flip, a trace read backwards), and jumps both ways (a square wave,
+   telegraph noise) are ``"jumps up as well as down"``;
 3. spacing: the lower quartile of the distances between consecutive slips at least
    :data:`MIN_SPACING` lattice spacings of the stated lattice. Slips are one (single
    slip) or several (multiple slip) lattice spacings apart; closer ones mean the stated
@@ -87,6 +86,7 @@ import numpy as np
 from numba import njit
 from threadpoolctl import ThreadpoolController
 
+import stickslip.estimators.segmentation as sg
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
@@ -125,74 +125,46 @@ N_FIELDS = 6
 
 
 @njit(cache=True, error_model="numpy")
-def _events(d: np.ndarray, sign: float, thr: float, min_size: float, pos: np.ndarray) -> int:
-    """Runs of ``sign * d > thr / 2`` that reach ``thr`` and add up to ``min_size``;
-    writes the index of each run's largest step into ``pos``, returns their number."""
-    n = d.size
-    k = 0
-    i = 0
-    while i < n:
-        if not (sign * d[i] > 0.5 * thr):
-            i += 1
-            continue
-        j = i
-        total = sign * d[i]
-        best = i
-        while j + 1 < n and sign * d[j + 1] > 0.5 * thr:
-            j += 1
-            total += sign * d[j]
-            if sign * d[j] > sign * d[best]:
-                best = j
-        if sign * d[best] > thr and total >= min_size:
-            pos[k] = best
-            k += 1
-        i = j + 1
-    return k
-
-
-@njit(cache=True, error_model="numpy")
 def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
-    # one loop per quantity where numpy expressions would allocate a temporary each:
-    # the same sums in the same order, so the same values
     n = F.size
     out[:] = np.nan
-    G = F.copy()  # 3-point median: a single-sample spike is not a slip
-    for i in range(1, n - 1):
-        a, b, c = F[i - 1], F[i], F[i + 1]
-        G[i] = max(min(a, b), min(max(a, b), c))
-    sigma = white_sigma(F)
-    xm, Gm = np.mean(x), np.mean(G)
+    out[NOISE] = white_sigma(F)
+    out[SPAN] = 0.0
+    if n < 4:
+        out[N_DROPS] = 0
+        out[N_RISES] = 0
+        return
+    # the 2 % and 98 % order statistics of the force less its straight trend
+    xm, Fm = np.mean(x), np.mean(F)
     sxx, sxy = 0.0, 0.0
     for i in range(n):
         u = x[i] - xm
         sxx += u * u
-        sxy += u * (G[i] - Gm)
+        sxy += u * (F[i] - Fm)
     slope = sxy / sxx if sxx > 0 else 0.0
-    # the 2 % and 98 % order statistics, both tails in one pass (select_tails)
     hi, lo = int(0.98 * (n - 1)), int(0.02 * (n - 1))
-    span = 0.0
     if hi > lo:
-        bottom, top = select_tails(G - slope * (x - xm), lo, hi)
-        span = top - bottom
-    d = np.empty(max(n - 1, 0))
-    ad = np.empty_like(d)
-    for i in range(n - 1):
-        d[i] = G[i + 1] - G[i]
-        ad[i] = abs(d[i])
-    thr = max(3.0 * np.sqrt(2.0) * sigma, 2.0 * median(ad), 1e-12)
-    min_size = max(0.25 * span, 6.0 * sigma, 1e-12)
-    pos = np.empty(d.size, np.int64)
-    nd = _events(d, -1.0, thr, min_size, pos)
+        bottom, top = select_tails(F - slope * (x - xm), lo, hi)
+        out[SPAN] = top - bottom
+    # the classical estimator's segmentation: a cycle's fall is a slip where it is fast
+    # against the stick's rise, its rise a sudden jump up where that is fast instead
+    cycles, _, _ = sg.find_cycles(F)
+    m = cycles.shape[0] - 1
+    pos = np.empty(max(m, 0))
+    nd = 0
+    nr = 0
+    for k in range(m):
+        if cycles[k, sg.CY_R_DOWN] >= sg.STICK_RATIO:
+            pos[nd] = x[int(0.5 * (cycles[k, sg.CY_PEAK] + cycles[k, sg.CY_VALLEY]))]
+            nd += 1
+        if cycles[k, sg.CY_R_UP] >= sg.STICK_RATIO:
+            nr += 1
     out[N_DROPS] = nd
+    out[N_RISES] = nr
     if nd >= 2:
-        gaps = np.empty(nd - 1)
-        for k in range(nd - 1):
-            gaps[k] = x[pos[k + 1] + 1] - x[pos[k] + 1]
+        gaps = pos[1:nd] - pos[: nd - 1]
         out[SPACING_MEDIAN] = median(gaps)
         out[SPACING_Q25] = percentile(gaps, 25.0)
-    out[N_RISES] = _events(d, 1.0, thr, min_size, pos)
-    out[NOISE] = sigma
-    out[SPAN] = span
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -217,14 +189,14 @@ class TraceChecks:
     Attributes
     ----------
     n_drops, n_rises : ndarray of int
-        Sudden drops (slips) and sudden rises found.
+        Cycles with a fast fall (slips) and with a sudden rise.
     spacing_median_nm, spacing_q25_nm : ndarray
         Median and lower quartile of the distances between consecutive drops (NaN with
         fewer than two drops).
     noise_nN : ndarray
         White-noise standard deviation per sample (from second differences).
     span_nN : ndarray
-        2-98 % range of the linearly detrended, despiked force.
+        2-98 % range of the linearly detrended force.
     """
 
     n_drops: np.ndarray

@@ -15,8 +15,8 @@ import pytest
 from scipy.signal import lfilter
 
 from stickslip.estimators.classical import estimate_trace
-from stickslip.estimators.classical.segmentation import CY_DROP, find_cycles
 from stickslip.estimators.mapping import resample_to_pixel
+from stickslip.estimators.segmentation import CY_DROP, find_cycles
 from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.simulate import simulate
 from stickslip.units import fmax_nN

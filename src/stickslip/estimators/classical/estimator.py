@@ -2,7 +2,7 @@
 
 The experimentalists' automated algorithm, made robust and physics-consistent:
 
-1. the line's cycles by one segmentation (:mod:`stickslip.estimators.classical.segmentation`:
+1. the line's cycles by one segmentation (:mod:`stickslip.estimators.segmentation`:
    a piecewise-linear sawtooth on a slow baseline, fitted by penalised least squares),
    which also gives the regime (fast falls after slow rises, or not) and the baseline,
    taken off before the sticks are fitted;
@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-import stickslip.estimators.classical.segmentation as sg
 import stickslip.estimators.classical.slips as sl
+import stickslip.estimators.segmentation as sg
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts

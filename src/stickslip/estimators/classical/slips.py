@@ -1,6 +1,6 @@
 """Stick fits and slips of one force trace, given its cycles (numba kernels).
 
-The cycles come from the segmentation of :mod:`stickslip.estimators.classical.segmentation`
+The cycles come from the segmentation of :mod:`stickslip.estimators.segmentation`
 (sticks, their straight parts, and the slips between them). Each stick gets a robust
 quadratic fit (one pass of outlier rejection at 4 sigma) over the whole stick and a
 robust straight-line fit of its straight part. The slip position inside its pixel
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-import stickslip.estimators.classical.segmentation as sg
+import stickslip.estimators.segmentation as sg
 from stickslip.robust import mad_sigma, white_sigma
 
 MIN_FIT_SAMPLES = 3  # straight line
