@@ -145,7 +145,8 @@ def friction_load_cmd(
     estimates: Path | None = typer.Option(
         None, "--estimates",
         help="Result table of label or infer on the same maps (CSV or JSON, with a load "
-             "column): U0 and K against load, with their intervals, under the friction."),
+             "column): the maps' pooled U0 and K against load, with their intervals, under "
+             "the friction; both laws also fitted to the pooled <F> (law pooled_*)."),
 ) -> None:
     """Mean friction, half (trace - retrace), versus setpoint/load for a load ramp.
 
@@ -203,7 +204,16 @@ def friction_load_cmd(
             info(law.summary(unit, load_unit_found))
         if reason:
             info(f"stickslip: note: {reason}")
+        fit_rows = lf.fits_rows(laws, unit, load_unit_found)
+        if est_summary and any("F_mean_nN_sigma" in r for r in est_summary):
+            pooled_laws, why = lf.fit_pooled_friction(est_summary)
+            for law in pooled_laws:
+                info("pooled <F> of the estimates: " + law.summary("nN", load_unit_found))
+            if why:
+                info(f"stickslip: note: {why}")
+            fit_rows += [{**row, "law": f"pooled_{row['law']}"}
+                         for row in lf.fits_rows(pooled_laws, "nN", load_unit_found)]
         lf.plot_friction_load(summary, laws, out, unit, est_summary)
-        if fits is not None and laws:
-            ResultTable(rows=lf.fits_rows(laws, unit, load_unit_found)).write(fits)
+        if fits is not None and fit_rows:
+            ResultTable(rows=fit_rows).write(fits)
     raise typer.Exit(EXIT_FAILED_INPUT if failed or not rows else EXIT_OK)

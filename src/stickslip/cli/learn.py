@@ -117,6 +117,8 @@ def run_estimation(
         usage_error(f"cannot write {out} ({e.strerror or e})")
     if ok:
         echo(inf.summary_text(result.table, truth))
+        if result.groups:
+            echo(inf.groups_text(result))
     if plots is not None:
         with progress_bar(inf.count_panels(result), "panels") as bar:
             panels = inf.write_panels(result, estimator, plots, progress=bar)

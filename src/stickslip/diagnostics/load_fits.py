@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from stickslip.estimators.pooling import group_table
 from stickslip.estimators.table import float_or_nan, read_table
 from stickslip.traces.formats.maps import TRACE, summarise_by_load
 from stickslip.traces.readers import expand_paths, is_scan_file, read_file, read_scan
@@ -449,18 +450,93 @@ def read_estimate_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
 
 
 ESTIMATE_KEYS = ("U0_eV", "K_N_m")
+POOLED_KEYS = ("F_mean_nN", "U0_eV", "K_N_m")
+
+
+def _load_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Rows with their cells as numbers where they are numbers (a CSV reads strings)."""
+    out = []
+    for r in rows:
+        rec: dict[str, Any] = {}
+        for k, v in r.items():
+            if isinstance(v, str) and k not in ("trace", "file", "channel", "direction",
+                                                 "quality", "load_unit", "in_domain"):
+                f = float_or_nan(v)
+                rec[k] = None if v == "" else (f if math.isfinite(f) or v.lower() == "nan"
+                                               else v)  # fmt: skip
+            else:
+                rec[k] = None if v == "" else v
+        if isinstance(rec.get("line"), float) and math.isfinite(rec["line"]):
+            rec["line"] = int(rec["line"])
+        out.append(rec)
+    return out
+
+
+def pooled_by_load(rows: Sequence[Mapping[str, Any]],
+                   keys: Sequence[str] = POOLED_KEYS) -> list[dict[str, Any]]:  # fmt: skip
+    """Per-load pooled estimates of the map lines among ``rows``, with their intervals.
+
+    The maps' lines are pooled (:func:`stickslip.estimators.pooling.group_table`); per
+    load, the whole-map group of trace and retrace together (one direction where a map
+    has one). For each key: ``<key>_mean`` (the pooled value; the mean of the maps' values
+    where several maps share a load), ``<key>_lo``/``<key>_hi`` (the pooled 68 % interval,
+    its mean over those maps), ``<key>_sigma`` (half its width), ``<key>_n`` (lines used)
+    and ``<key>_interval``. Loads with no map are left out.
+    """
+    groups = [g for g in group_table(_load_rows(rows)) if g["segment"] == "all"
+              and g.get("load") is not None]  # fmt: skip
+    chosen: dict[tuple, dict[str, Any]] = {}
+    for g in groups:
+        key = (g["file"], g["channel"], g["load_group"], g["load"])
+        if key not in chosen or g["direction"] == "both":
+            chosen[key] = g
+    out = []
+    for load in sorted({float(g["load"]) for g in chosen.values()}):
+        maps = [g for g in chosen.values() if float(g["load"]) == load]
+        rec: dict[str, Any] = {"load": load, "load_unit": maps[0].get("load_unit") or "",
+                               "n": sum(int(g["n_lines"]) for g in maps)}  # fmt: skip
+        for k in keys:
+            v = np.array([float_or_nan(g.get(k)) for g in maps])
+            lo = np.array([float_or_nan(g.get(f"{k}_lo68")) for g in maps])
+            hi = np.array([float_or_nan(g.get(f"{k}_hi68")) for g in maps])
+            ok = np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
+            if not ok.any():
+                continue
+            rec.update({f"{k}_mean": float(v[ok].mean()), f"{k}_lo": float(lo[ok].mean()),
+                        f"{k}_hi": float(hi[ok].mean()), f"{k}_n": rec["n"],
+                        f"{k}_sigma": float((hi[ok] - lo[ok]).mean() / 2),
+                        f"{k}_interval": "pooled 68 % interval of the map"})  # fmt: skip
+        out.append(rec)
+    return out
+
+
+def fit_pooled_friction(summary: Sequence[Mapping[str, Any]], key: str = "F_mean_nN"
+                        ) -> tuple[list[LawFit], str]:  # fmt: skip
+    """Both laws fitted to the maps' pooled <F> against load, each load weighted by its
+    pooled interval (:func:`pooled_by_load`); or no fit and the one-line reason."""
+    pts = [r for r in summary if math.isfinite(float_or_nan(r.get(f"{key}_mean")))]
+    sigma = np.array([float_or_nan(r.get(f"{key}_sigma")) for r in pts])
+    try:
+        return fit_load_laws([r["load"] for r in pts], [r[f"{key}_mean"] for r in pts],
+                             sigma if np.all(sigma > 0) else None), ""  # fmt: skip
+    except ValueError as e:
+        return [], f"no law fitted to the pooled <F>: {e}"
 
 
 def estimates_by_load(rows: Sequence[Mapping[str, Any]],
                       keys: Sequence[str] = ESTIMATE_KEYS) -> list[dict[str, Any]]:  # fmt: skip
-    """Per-load mean of learned or classical estimates, with an interval.
+    """Per-load estimates with an interval: the maps' pooled answer where the rows are
+    map lines (:func:`pooled_by_load`), else a plain summary over lines.
 
-    For each load group and key: ``<key>_mean`` (mean over the lines whose ``quality``
-    is ``ok``, or all lines where there is no quality column), ``<key>_std`` (spread over
-    lines), ``<key>_n``, and ``<key>_lo``/``<key>_hi``: the median over lines of each line's
-    68 % interval (``<key>_lo68``/``_hi68``, as ``infer`` writes) where the table has
-    one, else mean +- the spread over lines. Rows without a load are left out.
+    Plain summary, for each load group and key: ``<key>_mean`` (mean over the lines whose
+    ``quality`` is ``ok``, or all lines where there is no quality column), ``<key>_std``
+    (spread over lines), ``<key>_n``, and ``<key>_lo``/``<key>_hi``: the median over lines
+    of each line's 68 % interval (``<key>_lo68``/``_hi68``, as ``infer`` writes) where the
+    table has one, else mean +- the spread over lines. Rows without a load are left out.
     """
+    pooled = pooled_by_load(rows, tuple(dict.fromkeys([*keys, "F_mean_nN"])))
+    if pooled:
+        return pooled
     usable = []
     for r in rows:
         q = r.get("quality")

@@ -5,14 +5,19 @@ traces behind its rows and a few facts about the run into a single HTML file tha
 opens offline: every figure is a PNG embedded as a ``data:`` URI, the style sheet is
 inline, there is no script and nothing is fetched from the network. Sections:
 
+- **Per-map answer** (where the table has map lines): the pooled <F>, U0, K and eta of
+  each map, direction and load group with their 68 % / 95 % intervals, the between-line
+  spread tau, the lines used and left out, and any change point along the slow scan
+  axis (:mod:`stickslip.estimators.pooling`).
 - **The run**: input files, the conditions used and where each came from, the
   estimator and its version, counts of rows (ok, flagged, unreadable, and out of
   domain where the table has an ``in_domain`` column), notes, the command line.
 - **Results**: the table, a readable subset of columns first, every column in a
   collapsible ``<details>``.
 - **Friction maps** (traces with ``line`` metadata, grouped by source file and
-  channel): per direction, the lines stacked as a friction image beside <F>, U0 and K
-  (and the in-domain verdict where known) per scan line.
+  channel): per direction, the lines stacked as a friction image (its colours scaled
+  per direction) beside <F>, U0 and K (and the in-domain verdict where known) per scan
+  line; change points drawn as dashed lines, lines left out of the map's answer marked.
 - **Against load** (where rows carry a load): <F>, U0 and K of each line with its
   interval, and the mean per load.
 - **Learned against classical** (where ``classical_*`` columns exist): parity of U0
@@ -125,6 +130,7 @@ def write_report(
     overlays: Mapping[str, np.ndarray] | None = None,
     *,
     max_gallery: int = MAX_GALLERY,
+    groups: Sequence[Mapping[str, Any]] | None = None,
 ) -> Path:
     """Write the run's report as one self-contained HTML file, atomically.
 
@@ -152,6 +158,10 @@ def write_report(
         posterior predictive check), drawn over the trace in the gallery.
     max_gallery : int
         Most panels in the gallery of flagged traces; the others are named.
+    groups : sequence of mapping, optional
+        The per-map pooled answer (rows of the groups table,
+        :func:`stickslip.estimators.pooling.pool_groups`): shown first, and its change
+        points drawn on the maps.
 
     Returns
     -------
@@ -163,13 +173,17 @@ def write_report(
     has_domain = "in_domain" in table.columns
     flagged = [r for r in rows if r.trace is not None and r.flagged]
     in_gallery = {r.index for r in flagged[: max(max_gallery, 0)]}
-    sections: list[tuple[str, str, str]] = [
+    sections: list[tuple[str, str, str]] = []
+    if groups:
+        sections.append(("answer", "Per-map answer", _groups_section(groups)))
+    sections += [
         ("run", "The run", _run_section(table, rows, run_info, has_domain)),
         ("results", "Results", _table_section(table, rows, in_gallery)),
     ]
     maps = _map_groups(rows)
     if maps:
-        sections.append(("maps", "Friction maps", _maps_section(maps, table, has_domain)))
+        sections.append(("maps", "Friction maps",
+                         _maps_section(maps, table, has_domain, groups or ())))
     if _load_rows(rows):
         sections.append(("load", "Against load", _load_section(rows)))
     if _classical_pairs(rows):
@@ -655,8 +669,66 @@ def _interval(r: _Row, key: str) -> tuple[float, float, str]:
     return math.nan, math.nan, ""
 
 
+def _changes(pooled: Sequence[Mapping[str, Any]], source: str, channel: str
+             ) -> dict[str, list[int]]:  # fmt: skip
+    """Change lines of a map's groups, per direction (``both`` counts for each)."""
+    out: dict[str, list[int]] = {}
+    for g in pooled:
+        line = g.get("change_line")
+        if g.get("segment") != "all" or is_missing(line) or line is None:
+            continue
+        if str(g.get("file") or "") != source or str(g.get("channel") or "") != channel:
+            continue
+        dirs = DIRECTION_ORDER[:2] if g.get("direction") == "both" else (str(g["direction"]),)
+        for d in dirs:
+            out.setdefault(d, [])
+            if int(line) not in out[d]:
+                out[d].append(int(line))
+    return out
+
+
+def _groups_section(pooled: Sequence[Mapping[str, Any]]) -> str:
+    """The per-map answer: one table row per group, value [95 %] (68 %) and tau."""
+    keys = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
+    head = ["group", "direction", "segment", "lines", "used", "left out"]
+    head += [f"{TARGET_LABELS[k]} [95 %] (68 %)" for k in keys]
+    head += [f"tau {k.split('_')[0]}" for k in keys] + ["change line"]
+    body = []
+    for g in pooled:
+        cells = [_td(g.get(c)) for c in ("group", "direction", "segment", "lines", "n_lines",
+                                         "n_left_out")]  # fmt: skip
+        for k in keys:
+            v, lo, hi, lo68, hi68 = (_num(g.get(c)) for c in
+                                     (k, f"{k}_lo95", f"{k}_hi95", f"{k}_lo68", f"{k}_hi68"))
+            text = (f"{v:.4g} [{lo:.3g}, {hi:.3g}] ({lo68:.3g}, {hi68:.3g})"
+                    if math.isfinite(v) else "")  # fmt: skip
+            cells.append(f'<td class="num">{_esc(text)}</td>')
+        for k in keys:
+            t, tlo, thi = (_num(g.get(c)) for c in (f"{k}_tau", f"{k}_tau_lo95", f"{k}_tau_hi95"))
+            text = f"{t:.3g} [{tlo:.2g}, {thi:.2g}]" if math.isfinite(t) else ""
+            cells.append(f'<td class="num">{_esc(text)}</td>')
+        cells.append(_td(g.get("change_line")))
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    table = ("<div class=\"scroll\"><table><thead><tr>"
+             + "".join(f"<th>{_esc(h)}</th>" for h in head)
+             + "</tr></thead><tbody>" + "\n".join(body) + "</tbody></table></div>")  # fmt: skip
+    caption = (
+        "One answer per map, scan direction and load group: the lines' estimates pooled by "
+        "a random-effects model (REML) on their own intervals (U0, K and eta on a log scale), "
+        "with a systematic floor for the errors all lines of a map share (tip, stated "
+        "conditions, calibration, an offset per scan direction), calibrated on simulated "
+        "maps. 'both': trace and retrace together (an offset that does not reverse cancels). "
+        "tau: the spread between lines (log units for U0, K, eta: a relative spread; nN for "
+        "<F>) with its 95 % Q-profile interval. 'left out': lines without an estimate, out "
+        "of domain, or outside their map's predictive interval (map_reason). Where the lines "
+        "change along the slow scan axis (a tip change, a domain) the change line is given "
+        "and each side is pooled on its own (before / after).")
+    return table + f'\n<p class="caption">{_esc(caption)}</p>'
+
+
 def _maps_section(
-    groups: Mapping[tuple[str, str], list[_Row]], table: ResultTable, has_domain: bool
+    groups: Mapping[tuple[str, str], list[_Row]], table: ResultTable, has_domain: bool,
+    pooled: Sequence[Mapping[str, Any]] = (),
 ) -> str:
     parts = []
     for (source, channel), group in groups.items():
@@ -665,7 +737,9 @@ def _maps_section(
         title = Path(source).name or "(no file)"
         if channel:
             title += f" \u2014 {channel}"
-        uri, caption = _map_figure(group, dirs, lines, has_domain)
+        file = str(group[0].row.get("file") or source)
+        uri, caption = _map_figure(group, dirs, lines, has_domain,
+                                   _changes(pooled, file, channel))
         parts.append(f"<h3>{_esc(title)}</h3>")
         parts.append(_img(uri, f"friction map {title}: image and estimates per line"))
         parts.append(f'<p class="caption">{_esc(caption)}</p>')
@@ -673,7 +747,8 @@ def _maps_section(
 
 
 def _map_figure(
-    group: Sequence[_Row], dirs: Sequence[str], lines: Sequence[int], has_domain: bool
+    group: Sequence[_Row], dirs: Sequence[str], lines: Sequence[int], has_domain: bool,
+    changes: Mapping[str, Sequence[int]] | None = None,
 ) -> tuple[str, str]:
     from matplotlib import transforms
     from matplotlib.colors import to_rgb
@@ -689,13 +764,16 @@ def _map_figure(
     )
     unit = str(group[0].trace.meta.get("unit") or "nN")
     x_px = group[0].trace.meta.get("x_unit") == "px"
-    forces = np.concatenate([np.asarray(r.trace.force_nN, float).ravel() for r in group])
-    forces = forces[np.isfinite(forces)]
-    vmin, vmax = np.percentile(forces, [1, 99]) if forces.size else (0.0, 1.0)
+    changes = changes or {}
     level = ""
     n_px = max(int(np.asarray(r.trace.force_nN).size) for r in group)
     for d_i, direction in enumerate(dirs):
         sub = [r for r in group if str(r.trace.meta.get("direction") or "") == direction]
+        # each direction its own colour scale: a real map's trace and retrace differ by
+        # twice the offset, and one shared scale leaves each image one flat colour
+        forces = np.concatenate([np.asarray(r.trace.force_nN, float).ravel() for r in sub])
+        forces = forces[np.isfinite(forces)]
+        vmin, vmax = np.percentile(forces, [1, 99]) if forces.size else (0.0, 1.0)
         image = np.full((n_lines, n_px), np.nan)
         x_max = 0.0
         for r in sub:
@@ -706,6 +784,8 @@ def _map_figure(
             x = np.asarray(r.trace.x_nm, float)
             x_max = max(x_max, float(x[-1] - x[0]) * f.size / max(f.size - 1, 1))
         ax = axes[d_i, 0]
+        for c in changes.get(direction, ()):
+            ax.axhline(c - 0.5, color="w", ls="--", lw=1.0)
         im = ax.imshow(
             image,
             aspect="auto",
@@ -737,6 +817,15 @@ def _map_figure(
             if key == "F_mean_nN":  # the plain mean of each line, for comparison
                 means = [float(np.mean(by_line[y].trace.force_nN)) for y in ys]
                 ax.plot(means, ys, "-", color="0.5", lw=0.7, label="line mean")
+            for c in changes.get(direction, ()):
+                ax.axhline(c - 0.5, color="C1", ls="--", lw=1.0,
+                           label="change point" if k_i == 0 else None)
+            apart = np.array([not is_missing(by_line[y].row.get("map_reason"))
+                              and by_line[y].row.get("map_reason") is not None
+                              for y in ys], bool)  # fmt: skip
+            if apart.any():
+                ax.plot(vals[apart], ys[apart], "o", mfc="none", color="C1", ms=6,
+                        label="left out of the map's answer")
             bad = np.array([by_line[y].refused or by_line[y].ppc for y in ys], bool)
             if bad.any():
                 tr = transforms.blended_transform_factory(ax.transAxes, ax.transData)
@@ -784,11 +873,13 @@ def _map_figure(
         f"{len(lines)} scan lines (lines {l0}-{l1}), "
         + ", ".join(f"{n} {d or 'undirected'}" for d, n in n_dir.items())
         + f", {n_px} pixels per line. Left: the lines stacked as an image (colour scale "
-        "1st-99th percentile of the map"
+        "1st-99th percentile of each direction's lines"
         + ("; retrace lines drawn in sample x order, sign as friction" if "retrace" in dirs else "")
         + "). Right: estimates per line, "
         + (f"shaded {level}" if level else "no intervals")
-        + "; grey: plain mean of the line; red x: flagged line"
+        + "; grey: plain mean of the line; red x: flagged line; orange circle: a line "
+        "inconsistent with its map (left out of the per-map answer); dashed: change point "
+        "along the slow scan axis"
         + ("; in domain: green yes, red no, grey not judged" if has_domain else "")
         + "."
     )

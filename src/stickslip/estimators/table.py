@@ -239,17 +239,57 @@ class ResultTable:
 
     def write(self, path: str | os.PathLike) -> Path:
         """Write the table atomically in the format its extension names."""
-        fmt = table_format(path)
-        path = Path(path)
-        if fmt == "csv":
-            write_text_atomic(path, self.to_csv())
-        elif fmt == "json":
-            write_text_atomic(path, json.dumps(self.records(), indent=1) + "\n")
-        else:
-            frame = self.to_frame()
-            with atomic_path(path) as tmp:
-                frame.to_parquet(tmp, index=False)
-        return path
+        return write_records(self.records(), self.columns, path)
+
+    def groups(self, calibration: Any = None):
+        """The per-map pooled answer as a pandas DataFrame, one row per group of lines
+        (a map's direction, its trace and retrace together, each side of a change
+        point; columns :data:`stickslip.estimators.pooling.GROUP_COLUMNS`), the same
+        table ``infer`` writes as ``<out>.groups.csv``.
+
+        ``calibration``: a :class:`~stickslip.estimators.pooling.PoolingCalibration`
+        (default: the bundled one).
+        """
+        import pandas as pd
+
+        from stickslip.estimators.pooling import GROUP_COLUMNS, group_table
+
+        records = [{c: _plain(v) for c, v in g.items()}
+                   for g in group_table(self.rows, calibration)]  # fmt: skip
+        return pd.DataFrame.from_records(records, columns=list(GROUP_COLUMNS))
+
+
+def write_records(records: Sequence[Mapping[str, Any]], columns: Sequence[str],
+                  path: str | os.PathLike) -> Path:  # fmt: skip
+    """Write rows (plain values, None where missing) atomically in the format the
+    extension names (``.csv``, ``.json``, ``.parquet``), columns in the order given."""
+    fmt = table_format(path)
+    path = Path(path)
+    cols = list(columns)
+    if fmt == "csv":
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(cols)
+        for r in records:
+            w.writerow([_cell(_plain(r.get(c))) for c in cols])
+        write_text_atomic(path, buf.getvalue())
+    elif fmt == "json":
+        plain = [{c: _plain(r.get(c)) for c in cols} for r in records]
+        write_text_atomic(path, json.dumps(plain, indent=1) + "\n")
+    else:
+        import pandas as pd
+
+        frame = pd.DataFrame.from_records([{c: _plain(r.get(c)) for c in cols} for r in records],
+                                          columns=cols)  # fmt: skip
+        with atomic_path(path) as tmp:
+            frame.to_parquet(tmp, index=False)
+    return path
+
+
+def sibling_path(out: str | os.PathLike, part: str) -> Path:
+    """``<out stem>.<part><out suffix>`` beside ``out`` (``results.groups.csv``)."""
+    out = Path(out)
+    return out.with_name(f"{out.stem}.{part}{out.suffix}")
 
 
 def _cell(value: Any) -> str:

@@ -36,6 +36,7 @@ from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.classical.estimator import warm as classical_warm
 from stickslip.estimators.classical.slips import analyse_trace
 from stickslip.estimators.pairs import add_pair_columns
+from stickslip.estimators.pooling import GROUP_COLUMNS, groups_summary, pool_groups
 from stickslip.estimators.table import (
     OK,
     VOLT_NAMES,
@@ -43,6 +44,8 @@ from stickslip.estimators.table import (
     domain_verdict,
     failure_row,
     has_estimate,
+    sibling_path,
+    write_records,
 )
 from stickslip.simulators.kernel import KERNELS as SIMULATOR_KERNELS
 from stickslip.traces.readers import collect_traces, expand_paths
@@ -67,12 +70,16 @@ class InferResult:
         Inputs that could not be read.
     replicates : dict
         Row index -> the PT model simulated at the estimate (after ``check``).
+    groups : list of dict
+        The per-map pooled answer, one row per group of map lines
+        (:func:`stickslip.estimators.pooling.pool_groups`); empty without map lines.
     """
 
     table: ResultTable
     traces: list[Trace | None]
     read_errors: list[TraceReadError] = field(default_factory=list)
     replicates: dict[int, np.ndarray] = field(default_factory=dict)
+    groups: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def refused(self) -> list[int]:
@@ -225,7 +232,29 @@ def infer(
                                   domain_reason=f"no estimate: {e.reason}")  # fmt: skip
         result.traces.append(None)
     result.read_errors = list(read_errors)
+    add_map_groups(result)
     return result
+
+
+#: The column that says why a map line was left out of its map's pooled answer.
+MAP_REASON = "map_reason"
+
+
+def add_map_groups(result: InferResult) -> None:
+    """Pool the map lines of the result per map, direction and load group
+    (:func:`~stickslip.estimators.pooling.pool_groups`): ``result.groups``, and on every
+    line the pool left out as inconsistent with its map, ``map_reason``."""
+    pooled = pool_groups(result.table.rows)
+    result.groups = [{c: g.get(c) for c in GROUP_COLUMNS} for g in pooled.groups]
+    for i, reason in pooled.reasons.items():
+        result.table.rows[i][MAP_REASON] = reason
+    n_flag, n_change = len(pooled.reasons), sum(
+        1 for g in result.groups if g["segment"] == "all" and g["change_line"] is not None)
+    if n_flag or n_change:
+        result.table.notes.append(
+            f"per-map pooling: {n_flag} line(s) inconsistent with their map (map_reason) left "
+            f"out of its answer; {n_change} group(s) with a change point along the slow scan "
+            "axis, pooled either side (groups table)")  # fmt: skip
 
 
 def ppc_seed(name: str) -> int:
@@ -285,9 +314,12 @@ def _check(table: ResultTable, traces: Sequence[Trace], progress: Progress | Non
 
 def write_outputs(result: InferResult, out: str | os.PathLike, title: str = "estimates"
                   ) -> list[Path]:  # fmt: skip
-    """Write the table (format from the extension) and, where lines carry loads, the
-    per-load summary beside it; returns the paths written."""
+    """Write the table (format from the extension), the per-map pooled answer beside it
+    where there are map lines (``<out stem>.groups.<ext>``) and, where lines carry loads,
+    the per-load summary; returns the paths written."""
     written = [result.table.write(out)]
+    if result.groups:
+        written.append(write_records(result.groups, GROUP_COLUMNS, sibling_path(out, "groups")))
     estimated = [r for r in result.table.rows if has_estimate(r)]
     written += write_load_report(estimated, out, f"{title} versus load")
     return written
@@ -413,6 +445,11 @@ def summary_text(table: ResultTable, truth: dict[str, dict] | None = None, limit
     return "\n".join(lines)
 
 
+def groups_text(result: InferResult, limit: int = 12) -> str:
+    """The short per-map summary the terminal prints after the table ('' without maps)."""
+    return groups_summary(result.groups, limit)
+
+
 def write_run_report(result: InferResult, estimator: Estimator, path: str | os.PathLike,
                      inputs: Sequence[str | os.PathLike], command: Sequence[str] = ()
                      ) -> Path:  # fmt: skip
@@ -435,4 +472,4 @@ def write_run_report(result: InferResult, estimator: Estimator, path: str | os.P
     }
     traces = [t for t in result.traces if t is not None]
     overlays = {rows[i]["trace"]: rep for i, rep in result.replicates.items()}
-    return write_report(path, result.table, traces, info, overlays)
+    return write_report(path, result.table, traces, info, overlays, groups=result.groups)

@@ -1,0 +1,217 @@
+"""Per-map pooling: random-effects maths, the systematic floor, outlier lines, change points,
+and the groups table."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import optimize, stats
+
+from stickslip.estimators import pooling as pl
+from stickslip.estimators.table import ResultTable
+
+CAL = pl.PoolingCalibration(sys_single=dict.fromkeys(pl.POOL_TARGETS, 0.03),
+                            sys_both=dict.fromkeys(pl.POOL_TARGETS, 0.02))  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- maths
+
+
+def test_dersimonian_laird_hand_computed():
+    # w = (2, 1, 0.5), mu_w = 5/7, Q = 26/7, S1 - S2/S1 = 3.5 - 5.25/3.5 = 2
+    assert pl.dersimonian_laird([0.0, 1.0, 3.0], [0.5, 1.0, 2.0]) == pytest.approx(6 / 7)
+    # equal variances: tau2 = sample variance - v
+    assert pl.dersimonian_laird([0.0, 2.0, 4.0], [1.0, 1.0, 1.0]) == pytest.approx(3.0)
+    assert pl.dersimonian_laird([1.0, 1.1, 0.9], [1.0, 1.0, 1.0]) == 0.0
+
+
+def test_reml_maximises_the_restricted_likelihood():
+    rng = np.random.default_rng(4231)
+    v = rng.uniform(0.01, 0.2, 40)
+    y = rng.normal(0.3, np.sqrt(v + 0.05))
+
+    def nll(t2):
+        w = 1 / (v + t2)
+        mu = np.sum(w * y) / np.sum(w)
+        return 0.5 * (np.sum(np.log(v + t2)) + np.log(np.sum(w)) + np.sum(w * (y - mu) ** 2))
+
+    best = optimize.minimize_scalar(nll, bounds=(0, 2), method="bounded",
+                                    options={"xatol": 1e-10}).x  # fmt: skip
+    assert pl.reml_tau2(y, v) == pytest.approx(best, rel=1e-4)
+    # equal variances: REML is the sample variance minus v, as DL
+    assert pl.reml_tau2([0.0, 2.0, 4.0], [1.0, 1.0, 1.0]) == pytest.approx(3.0)
+
+
+def test_q_profile_ends_solve_the_chi2_equations():
+    rng = np.random.default_rng(4232)
+    v = rng.uniform(0.01, 0.05, 30)
+    y = rng.normal(0, np.sqrt(v + 0.04))
+    lo, hi = pl.q_profile(y, v)
+    fit = pl.random_effects(y, v)
+    assert 0 < lo < fit.tau2 < hi
+
+    def q(t2):
+        w = 1 / (v + t2)
+        return np.sum(w * (y - np.sum(w * y) / np.sum(w)) ** 2)
+
+    assert q(lo) == pytest.approx(stats.chi2.ppf(0.975, 29), rel=1e-6)
+    assert q(hi) == pytest.approx(stats.chi2.ppf(0.025, 29), rel=1e-6)
+
+
+def test_line_scale_reads_log_intervals():
+    y, v = pl.line_scale(np.array([2.0]), np.array([1.0]), np.array([4.0]), np.array([9.0]),
+                         log=True)  # fmt: skip
+    assert y[0] == pytest.approx(math.log(2))
+    assert math.sqrt(v[0]) == pytest.approx(math.log(4) / (2 * pl.Z95))
+    # no interval: the std relative to the value
+    y, v = pl.line_scale(np.array([2.0]), np.array([np.nan]), np.array([np.nan]),
+                         np.array([0.2]), log=True)  # fmt: skip
+    assert math.sqrt(v[0]) == pytest.approx(0.1)
+
+
+def _coverage(sys_rel, n_maps=400, n_lines=256, shared=0.05, seed=4233):
+    rng = np.random.default_rng(seed)
+    hits = 0
+    for _ in range(n_maps):
+        b = rng.normal(0, shared)  # the error every line of the map shares
+        sd = rng.uniform(0.05, 0.15, n_lines)
+        y = b + rng.normal(0, sd)
+        p = pl.pool_target(y, sd * sd, sys_rel, log=True)
+        hits += abs(p.mu) <= pl.Z95 * p.se
+    return hits / n_maps
+
+
+def test_systematic_floor_keeps_coverage_when_lines_share_an_error():
+    assert _coverage(0.0) < 0.5  # 1/sqrt(N) alone promises far too much
+    assert 0.92 <= _coverage(0.05) <= 0.98
+
+
+# ---------------------------------------------------------------------------- lines
+
+
+def test_outlier_lines_flagged_and_normal_lines_kept():
+    rng = np.random.default_rng(4234)
+    n = 300
+    sd = np.full((n, 2), 0.05)
+    Y = rng.normal(0, 0.05, (n, 2))
+    bad = np.array([10, 100, 200, 250])
+    Y[bad, 0] += 0.6
+    flags = pl.flag_outliers(Y, sd * sd, 3.5)
+    assert flags[bad].all()
+    assert flags[np.setdiff1d(np.arange(n), bad)].mean() <= 0.02
+
+
+def test_change_point_found_on_synthetic_log_estimates():
+    rng = np.random.default_rng(4235)
+    found = []
+    for _ in range(30):
+        n = int(rng.integers(32, 200))
+        c = int(rng.integers(8, n - 8))
+        Y = rng.normal(0, 0.05, (n, 3))
+        Y[c:, 1] += np.log(1.3)  # U0 up by 30 % from line c on
+        cp = pl.find_change(Y, 0.99, 4)
+        found.append(cp.index is not None and abs(cp.index - c) <= 3)
+    assert np.mean(found) >= 0.9
+
+
+def test_change_point_false_alarms_on_homogeneous_series():
+    rng = np.random.default_rng(4236)
+    alarms = [pl.find_change(rng.normal(0, 0.05, (128, 3)), 0.99, 4).index is not None
+              for _ in range(200)]  # fmt: skip
+    assert np.mean(alarms) <= 0.05
+    # a burst of three wild lines is not a change
+    Y = rng.normal(0, 0.05, (128, 3))
+    Y[60:63] += 1.0
+    assert pl.find_change(Y, 0.99, 4).index is None
+
+
+# ---------------------------------------------------------------------------- groups
+
+
+def _map_rows(n=64, change=None, seed=4237, refused=(), outliers=()):
+    """Rows as the line model writes them for one map in two directions."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for d, offset in (("trace", 0.1), ("retrace", -0.1)):
+        for line in range(n):
+            U0 = 1.5 * (1.4 if change is not None and line >= change else 1.0)
+            K, F = 10.0, 1.6 + offset
+            row = {"trace": f"m:Lat:{d}:L{line:03d}", "quality": "ok", "file": "m.spm",
+                   "channel": "Lat", "direction": d, "line": line, "load": 2.0,
+                   "load_unit": "nN"}  # fmt: skip
+            for key, val, rel in (("F_mean_nN", F, 0.1), ("U0_eV", U0, 0.05), ("K_N_m", K, 0.03),
+                                  ("eta", 52.26 * U0 / K, 0.06)):
+                est = val * math.exp(rng.normal(0, rel / 2))
+                if line in outliers and key == "U0_eV":
+                    est *= 2.0
+                row[key] = est
+                row[f"{key}_std"] = rel * est
+                row[f"{key}_lo95"] = est * math.exp(-pl.Z95 * rel)
+                row[f"{key}_hi95"] = est * math.exp(pl.Z95 * rel)
+            if line in refused:
+                row = {k: v for k, v in row.items() if k not in pl.POOL_TARGETS}
+                row["quality"] = "no slips found"
+            rows.append(row)
+    return rows
+
+
+def test_groups_of_one_map_directions_and_both():
+    rows = _map_rows(refused=(5,), outliers=(20,))
+    res = pl.pool_groups(rows, CAL)
+    by = {g["direction"]: g for g in res.groups}
+    assert set(by) == {"trace", "retrace", "both"}
+    g = by["trace"]
+    assert g["n_lines"] == 62 and g["n_left_out"] == 2  # one refused, one outlier
+    assert g["flagged_lines"] == "20" and g["change_line"] is None
+    assert g["U0_eV_lo95"] < 1.5 < g["U0_eV_hi95"]
+    # the floor: the 95 % half-width is at least z95 * sigma_sys of ln U0
+    assert math.log(g["U0_eV_hi95"] / g["U0_eV"]) >= pl.Z95 * 0.03 - 1e-12
+    # offsets of opposite sign per direction cancel in 'both'
+    assert by["trace"]["F_mean_nN"] > 1.6 > by["retrace"]["F_mean_nN"]
+    assert by["both"]["F_mean_nN"] == pytest.approx(1.6, rel=0.02)
+    assert by["both"]["n_lines"] == 124
+    reasons = {rows[i]["trace"] for i in res.reasons}
+    assert reasons == {"m:Lat:trace:L020", "m:Lat:retrace:L020"}
+    assert set(res.reasons.values()) == {pl.OUTLIER_REASON}
+
+
+def test_change_point_pools_either_side():
+    groups = pl.group_table(_map_rows(n=96, change=40), CAL)
+    whole = [g for g in groups if g["segment"] == "all"]
+    assert all(abs(g["change_line"] - 40) <= 3 for g in whole)
+    before = next(g for g in groups if g["segment"] == "before" and g["direction"] == "both")
+    after = next(g for g in groups if g["segment"] == "after" and g["direction"] == "both")
+    assert before["U0_eV"] == pytest.approx(1.5, rel=0.05)
+    assert after["U0_eV"] == pytest.approx(2.1, rel=0.05)
+
+
+def test_table_groups_frame_has_the_columns():
+    frame = ResultTable(rows=_map_rows(n=16)).groups(CAL)
+    assert list(frame.columns) == list(pl.GROUP_COLUMNS)
+    for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta"):
+        for s in ("", "_lo68", "_hi68", "_lo95", "_hi95", "_tau"):
+            assert f"{k}{s}" in frame.columns
+    assert list(frame["direction"]) == ["trace", "retrace", "both"]
+    assert (frame["n_lines"] == [16, 16, 32]).all()
+    assert (frame["U0_eV_lo95"] < frame["U0_eV_lo68"]).all()
+    # single traces (no line number) make no group
+    assert ResultTable(rows=[{"trace": "a", "quality": "ok", "U0_eV": 1.0}]).groups().empty
+
+
+def test_bundled_calibration_reads():
+    cal = pl.bundled_calibration()
+    assert set(cal.sys_single) >= set(pl.POOL_TARGETS) and cal.flag_z > 2
+    assert all(v > 0 for v in cal.sys_both.values())
+
+
+def test_outliers_judged_by_the_maps_own_scatter():
+    # lines agree ten times better than their intervals say: a line 8 scatters off is
+    # inconsistent with its map, though inside its own interval
+    rng = np.random.default_rng(4238)
+    Y = rng.normal(0, 0.005, (100, 1))
+    Y[42] = 0.04
+    V = np.full((100, 1), 0.05**2)
+    flags = pl.flag_outliers(Y, V, 3.5)
+    assert flags[42] and flags.sum() <= 2
+    # too few lines to tell their scatter: their intervals decide
+    assert not pl.flag_outliers(Y[30:50], V[30:50], 3.5).any()
