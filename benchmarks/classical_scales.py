@@ -51,16 +51,15 @@ def real_slices() -> None:
     x = 42e3 * (t - t[0])  # nm at 42 um/s
     F = fnorm * 0.0307 * 9.81 * 1e9  # nN: the stick slope comes out in N/m
     print(f"real: {MACRO.name}, {x.size} samples, spring {SPRING_N_M:g} N/m")
-    for length in (50_000, 100_000, 200_000):
-        for start in (0, 100_000, 300_000, 500_000):
-            if start + length > x.size:
-                continue
-            sl = slice(start, start + length)
-            est = estimate_trace(x[sl], F[sl], temperature_K=0)
-            err = 100 * (est.k_exp_N_m / SPRING_N_M - 1)
-            res = (f"k_exp {est.k_exp_N_m:7.1f} N/m  error {err:+5.1f} %"
-                   if est.quality == "ok" else f"refused: {est.quality}")  # fmt: skip
-            print(f"  start {start:7d}  samples {length:7d}  slips {est.n_slips:4d}  {res}")
+    slices = [(start, length) for length in (50_000, 100_000, 200_000, 400_000)
+              for start in (0, 100_000, 300_000, 500_000) if start + length <= x.size]
+    for start, length in [*slices, (0, x.size)]:  # then the whole file
+        sl = slice(start, start + length)
+        est = estimate_trace(x[sl], F[sl], temperature_K=0)
+        err = 100 * (est.k_exp_N_m / SPRING_N_M - 1)
+        res = (f"k_exp {est.k_exp_N_m:7.1f} N/m  error {err:+5.1f} %"
+               if est.quality == "ok" else f"refused: {est.quality}")  # fmt: skip
+        print(f"  start {start:7d}  samples {length:7d}  slips {est.n_slips:4d}  {res}")
 
 
 def simulated(noise: float, seed: int) -> None:

@@ -191,7 +191,17 @@ def _locate_slip(x: np.ndarray, F: np.ndarray, pre: np.ndarray, post: np.ndarray
         xv = pre[SEG_XREF] - pre[SEG_C1] / (2.0 * c2)
         if x[int(pre[SEG_START])] < xv < x_end:
             peak = max(peak, _poly_at(pre, xv))
-    out[SLIP_PEAK] = peak
+    # pixel averaging hides at most one sample interval of the stick's rise before a
+    # sudden slip: a peak extrapolated higher than that above the samples is a fall
+    # that took its time (smooth sliding), not a slip the pixels averaged away
+    top = F[e]
+    for k in range(e + 1, s):
+        top = max(top, F[k])
+    u = x[e] - pre[SEG_XREF]
+    rise = max(pre[SEG_C1] + 2.0 * pre[SEG_C2] * u, 0.0) * (x[e + 1] - x[e])
+    cap = top + rise + 3.0 * sigma
+    out[SLIP_F] = min(out[SLIP_F], cap)
+    out[SLIP_PEAK] = min(peak, cap)
 
 
 @njit(cache=True, error_model="numpy")
