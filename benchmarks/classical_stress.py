@@ -744,6 +744,17 @@ def machine() -> dict[str, Any]:
             "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds")}  # fmt: skip
 
 
+def shift_seeds(shift: int) -> None:
+    """Move every seed of the corpus by ``shift`` (module state: the draws read it)."""
+    g = globals()
+    for name in ("SEED_BROAD", "SEED_PAPER", "SEED_STRENGTH", "SEED_INSTRUMENT", "SEED_POOL",
+                 "SEED_FAMILIES", "SEED_FAMILY_TILT", "SEED_BENCH", "SEED_BENCH_TILT",
+                 "SEED_CLEAN"):  # fmt: skip
+        g[name] += shift
+    for key in SEEDS:
+        SEEDS[key] += shift
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "stress")
@@ -752,7 +763,14 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="write the figures here")
     ap.add_argument("--regenerate", action="store_true", help="remake the spring-block corpus")
     ap.add_argument("--no-afm", action="store_true", help="score the spring-block set only")
+    ap.add_argument("--seed-shift", type=int, default=0,
+                    help="add this to every seed (another draw of the same corpus, cached "
+                         "under WORK/shift<N>): 10000 is the estimator's tuning draw, 20000 "
+                         "a second held-out draw")  # fmt: skip
     args = ap.parse_args()
+    if args.seed_shift:
+        shift_seeds(args.seed_shift)
+        args.work = args.work / f"shift{args.seed_shift}"
     args.work.mkdir(parents=True, exist_ok=True)
     info = machine()
     print(f"machine: {info['platform']}, {info['processor']}, {info['cpu_count']} cores, "
