@@ -90,7 +90,7 @@ import stickslip.estimators.segmentation as sg
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
-from stickslip.robust import median, percentile, select_tails, white_sigma
+from stickslip.robust import mad_sigma, median, percentile, select_tails, white_sigma
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
 ETA_WINDOW = (1.2, 40.0)
@@ -113,15 +113,20 @@ WIDEN_FACTOR = 3.0
 CHECK_WIDEN_FACTORS = {"spacing": 5.0}
 MAX_SCORE = 1e3  # domain_score is capped here (an eta of 0 would give infinity)
 #: Checks in the order a tie is reported.
-CHECKS = ("slips", "direction", "spacing", "eta_low", "eta_high", "stick_slip", "embedding")
+CHECKS = ("slips", "direction", "spacing", "change", "eta_low", "eta_high", "stick_slip",
+          "embedding")  # fmt: skip
 #: Estimates whose intervals :func:`widen_rows` widens: in nN units, and in V units for
 #: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
 WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
 LINEAR_TARGETS = ("F_mean_nN", VOLT_NAMES["F_mean_nN"])  # the others are log-normal
 
 # fields of the kernel's output
-N_DROPS, N_RISES, SPACING_MEDIAN, SPACING_Q25, NOISE, SPAN = range(6)
-N_FIELDS = 6
+N_DROPS, N_RISES, SPACING_MEDIAN, SPACING_Q25, NOISE, SPAN, CHANGE, CHANGE_X, DROP_SPREAD = (
+    range(9))  # fmt: skip
+N_FIELDS = 9
+#: Drops whose robust spread exceeds this fraction of their median are of unequal sizes
+#: (the spacing check then names more than one contact rather than a wrong lattice).
+UNEQUAL_DROPS = 0.3
 
 
 @njit(cache=True, error_model="numpy")
@@ -165,6 +170,20 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         gaps = pos[1:nd] - pos[: nd - 1]
         out[SPACING_MEDIAN] = median(gaps)
         out[SPACING_Q25] = percentile(gaps, 25.0)
+    # two regimes along the line (a tip that changes): a change of level in the
+    # slips' log drops or the sticks' log rise rates, from one cycle on
+    out[CHANGE] = 0.0
+    if m >= 8:
+        drops = cycles[:m, sg.CY_DROP]
+        out[DROP_SPREAD] = mad_sigma(drops) / max(median(drops), 1e-300)
+        for col in (sg.CY_DROP, sg.CY_RATE):
+            v = cycles[1:m, col]  # the first stick starts where the line does
+            if not np.all(v > 0):
+                continue
+            k, score = sg.level_change(np.log(v))
+            if k > 0 and score > out[CHANGE]:
+                out[CHANGE] = score
+                out[CHANGE_X] = x[int(cycles[k + 1, sg.CY_LO])]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -197,6 +216,14 @@ class TraceChecks:
         White-noise standard deviation per sample (from second differences).
     span_nN : ndarray
         2-98 % range of the linearly detrended force.
+    change_score : ndarray
+        The strongest change of level along the line's cycles, over its price
+        (:func:`~stickslip.estimators.segmentation.level_change`; above 1: two regimes).
+    change_nm : ndarray
+        Where that change is: the start of the first stick of the second regime (NaN
+        without eight cycles).
+    drop_spread : ndarray
+        Robust spread of the slips' drops over their median.
     """
 
     n_drops: np.ndarray
@@ -205,6 +232,9 @@ class TraceChecks:
     spacing_q25_nm: np.ndarray
     noise_nN: np.ndarray
     span_nN: np.ndarray
+    change_score: np.ndarray
+    change_nm: np.ndarray
+    drop_spread: np.ndarray
 
 
 def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
@@ -219,7 +249,7 @@ def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
     n = sizes.size
     if n == 0:
         e = np.empty(0)
-        return TraceChecks(e.astype(int), e.astype(int), e, e, e, e)
+        return TraceChecks(e.astype(int), e.astype(int), e, e, e, e, e, e, e)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     xs = np.concatenate([np.asarray(x, float) for x in x_nm])
     Fs = np.concatenate([np.asarray(f, float) for f in force_nN])
@@ -229,7 +259,8 @@ def trace_checks(x_nm: Sequence[np.ndarray], force_nN: Sequence[np.ndarray],
                               for a, b in zip(cuts[:-1], cuts[1:], strict=True)])  # fmt: skip
     return TraceChecks(out[:, N_DROPS].astype(int), out[:, N_RISES].astype(int),
                        out[:, SPACING_MEDIAN], out[:, SPACING_Q25], out[:, NOISE],
-                       out[:, SPAN])  # fmt: skip
+                       out[:, SPAN], out[:, CHANGE], out[:, CHANGE_X],
+                       out[:, DROP_SPREAD])  # fmt: skip
 
 
 _NAN = float("nan")
@@ -305,6 +336,7 @@ def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
         q25 = checks.spacing_q25_nm
         ok = np.isfinite(q25) & (q25 > 0) & (lattice_nm > 0)
         out["spacing"] = np.where(ok, MIN_SPACING * lattice_nm / q25, nan)
+        out["change"] = np.where(checks.change_score > 0, checks.change_score, nan)
         eta = _column(rows, "eta")
         lo, hi = eta_bounds_columns(rows)
         low = np.where(np.isfinite(hi), np.where(hi > 0, ETA_WINDOW[0] / hi, np.inf), nan)
@@ -337,8 +369,14 @@ def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
         return "jumps up as well as down: not a stick-slip sawtooth"
     if check == "spacing":
         med = checks.spacing_median_nm[i] / lattice_nm
+        if checks.drop_spread[i] > UNEQUAL_DROPS:
+            return (f"several unequal slips per lattice period (median {med:.2f} a apart): "
+                    "more than one contact")  # fmt: skip
         return (f"slips closer than one lattice spacing (median {med:.2f} a, stated "
                 f"a = {lattice_nm:g} nm)")  # fmt: skip
+    if check == "change":
+        return (f"the line changes part-way (at x = {checks.change_nm[i]:.2f} nm): "
+                "two regimes")  # fmt: skip
     eta = _number(row, "eta")
     if check == "eta_low":
         hi = eta_bounds(row)[1]
