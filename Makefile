@@ -4,14 +4,14 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-slow bench bench-learn model line-model clean
+.PHONY: install demo test docs test-slow bench bench-learn model line-model clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	# the local CPU wheel first, so the project's torch range installs nothing more
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e ".[formats,test,dask]"
+	$(BIN)/pip install -q -e ".[formats,test,dask,parquet,jpk,docs]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -22,6 +22,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks scripts
 	$(BIN)/python -m pytest -q -m "not slow"
+	$(MAKE) docs
+
+# the docs site, strictly (any warning fails), executing the tutorials; then site/
+docs: $(STAMP)
+	$(BIN)/python scripts/docs_api.py
+	DISABLE_MKDOCS_2_WARNING=true PATH="$(abspath $(BIN)):$$PATH" NUMBA_NUM_THREADS=$${NUMBA_NUM_THREADS:-2} $(BIN)/mkdocs build --strict --site-dir build/site
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow

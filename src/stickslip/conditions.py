@@ -46,6 +46,8 @@ class Reference:
     temperature_K: float = ROOM_TEMPERATURE_K
 
     def to_dict(self) -> dict[str, float]:
+        """The reference conditions as a plain dict (lattice in nm, velocity in nm/s,
+        temperature in K)."""
         return asdict(self)
 
 

@@ -120,6 +120,7 @@ class TraceEstimator:
         raise NotImplementedError
 
     def describe(self) -> str:
+        """One line saying what the estimator is (here its ``name``)."""
         return self.name
 
     def conditions(

@@ -83,6 +83,7 @@ class PhysicalSettings:
 
     @property
     def pixel_nm(self) -> float:
+        """Recorded pixel size in nm (``length_nm / pixels``)."""
         return self.length_nm / self.pixels
 
     def replace(self, **changes: Any) -> PhysicalSettings:
@@ -178,6 +179,7 @@ class SweepConfig:
     backend: str = "cpu"
 
     def to_json(self) -> str:
+        """The whole configuration as JSON (stored in every sweep file)."""
         d = dataclasses.asdict(self)
         if d["backend"] in ("cpu", "numba"):
             del d["backend"]
@@ -185,6 +187,7 @@ class SweepConfig:
 
     @classmethod
     def from_json(cls, text: str) -> SweepConfig:
+        """The configuration stored by :meth:`to_json`."""
         d = json.loads(text)
         return cls(
             physics=PhysicalSettings(**d["physics"]),

@@ -56,6 +56,7 @@ class Trace:
 
     @property
     def n(self) -> int:
+        """Number of samples (pixels) in the trace."""
         return int(self.force_nN.size)
 
     @property
