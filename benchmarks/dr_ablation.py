@@ -38,7 +38,7 @@ def main() -> None:
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}")  # fmt: skip
-    # the setup of the recorded ablation (docs/robustness.md): seed-101 set with no lines
+    # the setup of the recorded ablation (docs/explanation/): seed-101 set with no lines
     # on the reference lattice, no pristine oversampling
     rcfg = RandomisedConfig(seed=101, reference_fraction=0.0)
     data = cached_randomised_set(rcfg, args.work)

@@ -2,7 +2,7 @@
 
 The held-out set is the bundled window model's (paper preset, 800 trajectories, seed 1,
 cached in --work). ``--model`` takes anything ``load_estimator`` does: ``window`` (the
-default, the bundled paper MLP: docs/learning.md's table), ``default`` (the bundled
+default, the bundled paper MLP: docs/explanation/learned-model.md's table), ``default`` (the bundled
 line model), ``classical`` or a model file. Scored through :mod:`stickslip.jobs.evaluate`.
 
 Usage: python benchmarks/noise_robustness.py [--model window] [--n 800] [--seed 1]

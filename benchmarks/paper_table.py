@@ -78,7 +78,8 @@ from stickslip.traces.trace import Trace
 
 ROOT = Path(__file__).resolve().parents[1]
 WINDOW, STRIDE, TRAIN_STRIDE = 64, 64, 16
-MD_TRAIN_SEED, MD_TEST_SEED = LAB_MLP_SEED, 11  # the MD->MD sweeps of docs/learning.md
+# the MD->MD sweeps of docs/explanation/learned-model.md
+MD_TRAIN_SEED, MD_TEST_SEED = LAB_MLP_SEED, 11
 SPLIT_SEED, MIX_SEED = 3, 0
 # the paper's Table 1 (RMSE of <F> nN, U0 eV, K N/m); None: not in the main text
 PAPER = {

@@ -38,7 +38,7 @@ from stickslip.traces.dataset import load_dataset
 ROOT = Path(__file__).resolve().parents[1]
 RESOURCES = ROOT / "src" / "stickslip" / "resources"
 
-# the defaults chosen by validation (docs/learning.md)
+# the defaults chosen by validation (docs/explanation/learned-model.md)
 RECIPE, WINDOW, STRIDE, TRAIN_STRIDE, NOISE_NN = "pi", 64, 64, 16, 0.1
 TRAIN_SEED, TEST_SEED, N_TRAIN, N_TEST = PAPER_TRAIN_SEED, PAPER_HELDOUT_SEED, 1600, 800
 TEST_NOISE_NN, TEST_NOISE_SEED = 0.05, 2

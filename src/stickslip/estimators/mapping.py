@@ -7,7 +7,7 @@ the stick slope ``K eta / (1 + eta)`` and ``eta = 2 pi^2 U0 / (K a^2)`` are all 
 So positions are divided by ``s``, the trace is resampled (pixel means) onto the
 reference pixel, an estimator reads it, and ``U0 = U0' s``, ``K = K' / s`` map the answer
 back. Exact in the athermal limit; the scan velocity and the temperature act only
-through thermal activation, which the mapping does not carry over (docs/learning.md
+through thermal activation, which the mapping does not carry over (docs/explanation/learned-model.md
 gives the error this leaves). Every learned estimator maps through this module.
 """
 

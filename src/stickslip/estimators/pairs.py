@@ -34,7 +34,7 @@ signs, the pair is better than this bound says; it is never worse for Gaussian e
 
 The PT parameters of the pair. A learned model reads U0, K and eta partly off the
 force's level, so an offset moves them too, up in one direction and down in the other
-(``docs/robustness.md``, "Offsets restated in every calibration"). The pair's
+(``docs/explanation/``, "Offsets restated in every calibration"). The pair's
 ``U0_pair_eV``, ``K_pair_N_m`` and ``eta_pair`` are the geometric means of the two
 rows' estimates (the mean of their logarithms), where the offset's first-order effect
 cancels. Their intervals combine the rows' log half-widths as for independent errors,

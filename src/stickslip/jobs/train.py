@@ -68,8 +68,8 @@ class BundledRecipe:
     """The data behind the bundled line model (``--recipe bundled``)."""
 
     n: int = 4000
-    # three randomised sets: the learning curve (docs/learning.md) gains little past about
-    # 11k trajectories; 104 is left out because the typical set uses that seed
+    # three randomised sets: the learning curve (docs/explanation/learned-model.md) gains
+    # little past about 11k trajectories; 104 is left out because the typical set uses that seed
     seeds: tuple[int, ...] = (102, 103, 105)
     typical: int = 1500
     typical_seed: int = 104
@@ -234,7 +234,7 @@ def bundled_line_data(work: str | os.PathLike, recipe: BundledRecipe = BundledRe
     """The bundled line model's training data, simulated into ``work`` where missing.
 
     Domain-randomised sets (one per seed), a set on a typical measurement's substrate,
-    and clean paper-preset lines (see docs/learning.md)."""
+    and clean paper-preset lines (see docs/explanation/learned-model.md)."""
     work = Path(work)
     if recipe.paper_seed in RESERVED_SEEDS:
         raise TrainingDataError("the paper-preset seed must differ from the reserved seeds")

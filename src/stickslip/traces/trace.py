@@ -4,7 +4,7 @@ The project's plain trace format is a CSV file with header ``x_nm,force_nN``: su
 position in nm (from 0 at the first recorded pixel) and lateral force in nN, positive
 while sliding forward. Every command reads traces through :func:`collect_traces`,
 which also reads vendor friction maps and other layouts (see
-:mod:`stickslip.traces.formats` and docs/formats.md).
+:mod:`stickslip.traces.formats` and docs/reference/formats.md).
 """
 
 from __future__ import annotations

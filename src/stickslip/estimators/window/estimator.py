@@ -71,6 +71,6 @@ class WindowEstimator(TraceEstimator):
         return [f"model trained at v = {ref.velocity_nm_per_s:g} nm/s, T = "
                 f"{ref.temperature_K:g} K; traces at v = {', '.join(f'{x:g}' for x in v)} nm/s, "
                 f"T = {', '.join(f'{x:g}' for x in T)} K: thermal activation is not mapped "
-                "(error on simulated traces: docs/learning.md)"]  # fmt: skip
+                "(error on simulated traces: docs/explanation/learned-model.md)"]  # fmt: skip
 
 

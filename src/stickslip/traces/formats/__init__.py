@@ -4,7 +4,7 @@ One small module per format (:mod:`.bruker`, :mod:`.nanosurf`, :mod:`.asylum`,
 :mod:`.gwyddion`, :mod:`.mdt`, :mod:`.jpk`, :mod:`.text`, :mod:`.hdf5`); :mod:`.maps`
 turns friction maps into traces, computes friction loops and groups lines by load. The
 registry that maps file suffixes to readers is :mod:`stickslip.traces.readers`. See
-docs/formats.md.
+docs/reference/formats.md.
 """
 
 from stickslip.traces.formats.common import Channel, ScanFile

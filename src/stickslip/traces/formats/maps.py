@@ -1,6 +1,6 @@
 """From friction maps to per-line traces; friction loops; load schedules.
 
-Conventions (see docs/formats.md):
+Conventions (see docs/reference/formats.md):
 
 - A lateral-force image with trace and retrace channels becomes one trace per scan
   line and direction. Vendors store both images with columns in increasing x; the
