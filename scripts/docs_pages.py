@@ -71,6 +71,8 @@ DESCRIPTIONS = {
 OTHER_COLUMNS = {
     "in_domain": "the in/out-of-domain verdict (true/false)",
     "domain_score": "at most 1 in domain",
+    "change_nm": "where the line changes part-way (nm): the verdict found two regimes, "
+                 "e.g. a tip change (--split-changes estimates each part)",
     "domain_reason": "why a row is out of domain (see the how-to on the reasons)",
     "stick_slip_check": "the classical refusal that put a low-eta row out of domain",
     "F_model_std_nN": "the line model's own ⟨F⟩ spread, without offsets, nN",

@@ -364,3 +364,21 @@ def test_embedding_reason_shows_how_far_past_the_limit():
     checks = trace_checks([X], [sawtooth()])
     text = D.reason("embedding", checks, 0, A, {"domain_embedding": 1.0126})
     assert "1.01x the limit" in text
+
+
+def tip_change_sawtooth(change_nm: float = 5.0) -> np.ndarray:
+    """A sawtooth whose drop (the tip's stiffness times a lattice spacing) grows 1.6x at
+    ``change_nm``, with the period kept."""
+    phase = (X / A + 0.3) % 1.0
+    amp = np.where(X < change_nm, 1.0, 1.6)
+    return amp * (2.0 * phase - 1.0) + 0.01 * RNG.standard_normal(X.size)
+
+
+def test_a_line_that_changes_part_way_is_out_of_domain_with_where():
+    r = judge(tip_change_sawtooth(5.0))
+    assert r["in_domain"] is False
+    assert "the line changes part-way (at x = " in r["domain_reason"]
+    assert r["change_nm"] == pytest.approx(5.0, abs=0.5)
+    plain = judge(sawtooth())
+    assert plain["in_domain"] is True and plain["change_nm"] is None
+

@@ -59,3 +59,18 @@ def test_the_terminal_table_marks_the_verdict_and_keeps_its_columns():
     # without a verdict column (the window and classical estimators' tables), none
     plain = summary_text(ResultTable(rows=[_row("a", None)], estimator="classical"))
     assert "domain" not in plain
+
+
+def test_a_trace_that_changes_part_way_is_split_where_both_parts_are_long_enough():
+    from stickslip.jobs.infer import split_at_changes
+
+    x = np.linspace(0.0, 11.0, 512)
+    t = Trace(x_nm=x, force_nN=np.sin(x), name="line 7", meta={"line": 7, "direction": "trace"})
+    parts = split_at_changes([{"change_nm": 4.0}], [t])
+    assert [p.name for p in parts] == ["line 7 [x < 4.00 nm]", "line 7 [x >= 4.00 nm]"]
+    assert parts[0].x_nm.max() < 4.0 <= parts[1].x_nm.min()
+    assert parts[0].force_nN.size + parts[1].force_nN.size == 512
+    assert "line" not in parts[0].meta  # the parts join no map's pooled answer
+    # a part of under a fifth of the line, or no change: no split
+    assert split_at_changes([{"change_nm": 1.0}], [t]) == []
+    assert split_at_changes([{"change_nm": None}], [t]) == []

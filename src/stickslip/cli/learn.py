@@ -46,6 +46,8 @@ MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'class
 OUT_HELP = "Result table; the format follows the extension: .csv, .json or .parquet."
 LATTICE_HELP = "Lattice spacing a in nm (wins over the file's; default: the estimator's, 0.246)."
 VELOCITY_HELP = "Scan velocity in nm/s (wins over the file's; default: the estimator's, 60)."
+SPLIT_HELP = ("Where the verdict finds a trace changing part-way (a tip change, "
+              "change_nm), estimate each part on its own too (one more row each).")
 REPORT_HELP = "Also write one self-contained HTML report of the run (opens offline)."
 TEMPERATURE_HELP = "Temperature in K (wins over the file's; default: the estimator's, 296)."
 
@@ -81,6 +83,7 @@ def run_estimation(
     velocity: float | None, temperature: float | None, calibration: float | None,
     lines_per_load: int | None, loads: str | None, plots: Path | None, classical: bool,
     check: bool, truth: dict | None = None, examples: bool = False, report: Path | None = None,
+    split_changes: bool = False,
 ) -> int:  # fmt: skip
     """The shared body of ``infer``, ``label`` and ``demo``; returns the exit code."""
     _check_out(out)
@@ -102,7 +105,8 @@ def run_estimation(
     with progress_bar(len(found) if check else 0, "check") as bar:
         result = inf.infer(estimator, found, errors, lattice_nm=lattice,
                            velocity_nm_per_s=velocity, temperature_K=temperature,
-                           classical=classical, check=check, progress=bar)  # fmt: skip
+                           classical=classical, check=check, split_changes=split_changes,
+                           progress=bar)  # fmt: skip
     for line in result.error_lines():
         error(line)
     for note in result.table.notes:
@@ -157,6 +161,7 @@ def infer_cmd(
         False, "--check", help="Re-simulate each trace at its estimate and report a goodness "
         "of fit (gof, ppc_flag); with --plots the overlay is drawn."),
     report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
+    split_changes: bool = typer.Option(False, "--split-changes", help=SPLIT_HELP),
 ) -> None:
     """Estimate <F>, U0, K and eta of every trace, with any estimator.
 
@@ -170,6 +175,7 @@ def infer_cmd(
         _estimator(model), traces, out, lattice=lattice, velocity=velocity,
         temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
         loads=loads, plots=plots, classical=classical, check=check, report=report,
+        split_changes=split_changes,
     )  # fmt: skip
     raise typer.Exit(code)
 
@@ -187,6 +193,7 @@ def label_cmd(
     lines_per_load: int | None = typer.Option(None, "--lines-per-load", help=LPL_HELP),
     loads: str | None = typer.Option(None, "--loads", help=LOADS_HELP),
     report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
+    split_changes: bool = typer.Option(False, "--split-changes", help=SPLIT_HELP),
 ) -> None:
     """Label traces with the classical stick-slip estimator ('infer --model classical').
 
@@ -200,6 +207,7 @@ def label_cmd(
         load_estimator("classical"), traces, out, lattice=lattice, velocity=velocity,
         temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
         loads=loads, plots=plots, classical=False, check=False, report=report,
+        split_changes=split_changes,
     )  # fmt: skip
     raise typer.Exit(code)
 

@@ -10,11 +10,14 @@ Every estimator's :meth:`~stickslip.estimators.base.TraceEstimator.predict` ends
     The largest of the checks below, each a statistic divided by its limit, so that
     each check fails above 1: ``domain_score <= 1`` is in domain, 2 is twice as far
     past the nearest limit. Empty for rows without an estimate.
+``change_nm``
+    Where the line changes part-way (a tip that changed: the check "change" below),
+    else empty.
 ``domain_reason``
     Empty in domain; else the failed checks in plain words, worst first, separated
     by ``"; "`` (``"no estimate: <quality>"`` for rows without an estimate).
 
-The checks. The first four read the trace itself (:func:`trace_checks`, a compiled
+The checks. The first five read the trace itself (:func:`trace_checks`, a compiled
 kernel: the classical estimator's segmentation of the line into sticks and slips,
 :mod:`stickslip.estimators.segmentation`; chunks of lines on numba's threads)
 and the row's estimate, so they hold for every estimator:
@@ -27,12 +30,19 @@ and the row's estimate, so they hold for every estimator:
    sawtooth that does the opposite is ``"sawtooth reversed"`` (a retrace read without
    its sign flip, a trace read backwards), and jumps both ways (a square wave,
    telegraph noise) are ``"jumps up as well as down"``;
-3. spacing: the lower quartile of the distances between consecutive slips at least
+3. change: the line is one regime: no change of level, part-way along it, in its
+   slips' log drops or its sticks' log rise rates
+   (:func:`~stickslip.estimators.segmentation.level_change`: a likelihood ratio over
+   its price, at least a fifth of the cycles on each side and a 10 % step) --
+   ``"the line changes part-way (at x = ... nm): two regimes"``;
+4. spacing: the lower quartile of the distances between consecutive slips at least
    :data:`MIN_SPACING` lattice spacings of the stated lattice. Slips are one (single
    slip) or several (multiple slip) lattice spacings apart; closer ones mean the stated
    lattice is wrong or the drops are not slips -- ``"slips closer than one lattice
-   spacing"``;
-4. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
+   spacing"``, or, where the slips' drops are of unequal sizes (robust spread above
+   :data:`UNEQUAL_DROPS` of their median), ``"several unequal slips per lattice period:
+   more than one contact"``;
+5. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
    the estimate's own uncertainty (the window is missed when the whole 95 % interval,
    else ``eta +- 2 eta_std``, else the value, lies outside it) -- ``"eta below the
    trained window"`` (smooth sliding, or a barely bistable contact) or ``"... above"``;
@@ -44,7 +54,7 @@ and the row's estimate, so they hold for every estimator:
    model gives eta 1.15-1.45 for most of them), where it also puts weak stick-slip, so
    an estimate there cannot say which of the two the line is (the classical
    estimator inverts the slips and can report eta < 1.2, so it is held to the window);
-5. for learned estimators whose eta estimate is below :data:`ETA_CONFIRM`, the line's
+6. for learned estimators whose eta estimate is below :data:`ETA_CONFIRM`, the line's
    own slips: the classical estimator (slip detection, stick fits, PT inversion at T =
    0, the lower eta) must answer it. A model trained with the effect families
    (low-pass, precursor softening) puts smooth lines at eta 1.4-2 too, beyond any edge
@@ -53,7 +63,7 @@ and the row's estimate, so they hold for every estimator:
    classical refusal in the row's ``stick_slip_check`` (absent when not checked or
    answered) -- ``"eta near the trained window's edge and the slips do not invert to
    stick-slip"``;
-6. for estimators that give one: ``domain_embedding`` (a column of the row), the
+7. for estimators that give one: ``domain_embedding`` (a column of the row), the
    distance of the line from the estimator's training lines in units of its limit
    (the whole-line CNN: Mahalanobis distance of its pooled features from those of
    simulated training-like lines, :class:`EmbeddingReference`) -- ``"line unlike the
@@ -171,19 +181,15 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         out[SPACING_MEDIAN] = median(gaps)
         out[SPACING_Q25] = percentile(gaps, 25.0)
     # two regimes along the line (a tip that changes): a change of level in the
-    # slips' log drops or the sticks' log rise rates, from one cycle on
+    # cycles' drops, rise rates or peaks
     out[CHANGE] = 0.0
     if m >= 8:
         drops = cycles[:m, sg.CY_DROP]
         out[DROP_SPREAD] = mad_sigma(drops) / max(median(drops), 1e-300)
-        for col in (sg.CY_DROP, sg.CY_RATE):
-            v = cycles[1:m, col]  # the first stick starts where the line does
-            if not np.all(v > 0):
-                continue
-            k, score = sg.level_change(np.log(v))
-            if k > 0 and score > out[CHANGE]:
-                out[CHANGE] = score
-                out[CHANGE_X] = x[int(cycles[k + 1, sg.CY_LO])]
+        k, score = sg.cycle_change(cycles)
+        out[CHANGE] = score
+        if k > 0:
+            out[CHANGE_X] = x[int(cycles[k, sg.CY_LO])]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -478,9 +484,11 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
     # failed checks worst first (a stable sort: a tie goes in the order of CHECKS)
     order = np.argsort(np.where(failing, -table, np.inf), axis=1, kind="stable").tolist()
     n_failed = failing.sum(axis=1).tolist()
+    changed = failing[:, CHECKS.index("change")]
     for j, (row, nf, sc) in enumerate(zip(done, n_failed, score.tolist(), strict=True)):
         row["in_domain"] = nf == 0
         row["domain_score"] = sc
+        row["change_nm"] = float(checks.change_nm[j]) if changed[j] else None
         row["domain_reason"] = "; ".join(reason(CHECKS[c], checks, j, lattice[j], row, eta_edge)
                                          for c in order[j][:nf]) or None  # fmt: skip
     if widen:

@@ -77,9 +77,11 @@ PARAMS_PER_SEGMENT = 3.0
  CY_R_UP, CY_TOP, CY_RATE) = range(11)  # fmt: skip
 N_CY_COLS = 11
 #: A change of level along a series of per-cycle values counts where its likelihood
-#: ratio exceeds this many ln(n): about 1 % false alarms on white series of 20-300
-#: values (the noise scale, from the differences, is uncertain on short series).
-CHANGE_PENALTY = 5.0
+#: ratio exceeds this many ln(n). White series of 20-300 values pass 15 ln(n) far less
+#: than 1 % of the time; lab-like lines (gain drift, telegraph steps, detector effects:
+#: the effect families of ``benchmarks/domain.py``, seed 1) reach at most 4 times 5 ln(n)
+#: while a tip change of 1.3-2x that shows in the drops or the slopes scores hundreds.
+CHANGE_PENALTY = 15.0
 #: ... and where the two levels differ by at least this much (in the log of a per-cycle
 #: quantity: 10 %, far below the 1.3x of a tip change worth reporting)
 MIN_LEVEL_CHANGE = 0.1
@@ -634,30 +636,18 @@ def baseline(x: np.ndarray, F: np.ndarray, cycles: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def level_change(v: np.ndarray) -> tuple[int, float]:
-    """The most likely single change of level in a series (per-cycle values in order).
-
-    The noise of one value is the robust scatter of the series' first differences over
-    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
-    about the two levels of the best split (a slow trend is smooth from value to value
-    but no step); the statistic is the likelihood ratio ``(mean_1 - mean_2)^2 / (s^2
-    (1/k + 1/(n - k)))`` of the best split, over its price ``CHANGE_PENALTY ln n``:
-    above 1, the series has two levels.
-
-    Returns
-    -------
-    k : int
-        First index of the second part (-1 for fewer than eight values).
-    score : float
-        The statistic over its price.
-    """
+def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
+    """The likelihood ratio of a change of level before each index of ``v`` (NaN where
+    not tried), already judged against the scatter about the best split's two levels,
+    and the series' score (:func:`level_change`)."""
     n = v.size
+    T = np.full(n, np.nan)
     if n < 8:
-        return -1, 0.0
+        return T, 0.0
     d = v[1:] - v[:-1]
     s = mad_sigma(d) / np.sqrt(2.0)
     if not s > 0:
-        return -1, 0.0
+        return T, 0.0
     # one odd cycle (a missed slip) is not a regime: values clipped at 4 s from the
     # median of their own half of the line
     w = v.copy()
@@ -677,12 +667,12 @@ def level_change(v: np.ndarray) -> tuple[int, float]:
             continue
         m1 = left / k
         m2 = (total - left) / (n - k)
-        t = (m1 - m2) ** 2 / (s * s * (1.0 / k + 1.0 / (n - k)))
-        if t > best:
-            best = t
+        T[k] = (m1 - m2) ** 2 / (s * s * (1.0 / k + 1.0 / (n - k)))
+        if T[k] > best:
+            best = T[k]
             arg = k
     if arg < 0:
-        return -1, 0.0
+        return T, 0.0
     # judged against the scatter about the two levels, not only between neighbours: a
     # slow trend (a modulated barrier) is smooth from cycle to cycle but no step
     res = np.empty(n)
@@ -690,8 +680,77 @@ def level_change(v: np.ndarray) -> tuple[int, float]:
     m2 = median(w[arg:])
     for i in range(n):
         res[i] = w[i] - (m1 if i < arg else m2)
-    s_res = mad_sigma(res)
-    best *= (s / max(s, s_res)) ** 2
+    T *= (s / max(s, mad_sigma(res))) ** 2
     if abs(m1 - m2) < MIN_LEVEL_CHANGE:
-        return arg, 0.0
-    return arg, best / (CHANGE_PENALTY * np.log(n))
+        return T, 0.0
+    # a step, not a slope: two levels must explain the series better than a straight
+    # line through it by the BIC price of the step's place
+    idx = np.arange(n) - 0.5 * (n - 1)
+    slope = np.sum(idx * (w - np.mean(w))) / np.sum(idx * idx)
+    rss_line = np.sum((w - np.mean(w) - slope * idx) ** 2)
+    mu1 = np.mean(w[:arg])
+    mu2 = np.mean(w[arg:])
+    rss_step = np.sum((w[:arg] - mu1) ** 2) + np.sum((w[arg:] - mu2) ** 2)
+    if not n * np.log(rss_line / max(rss_step, 1e-300)) > np.log(n):
+        return T, 0.0
+    return T, np.nanmax(T) / (CHANGE_PENALTY * np.log(n))
+
+
+@njit(cache=True, error_model="numpy")
+def level_change(v: np.ndarray) -> tuple[int, float]:
+    """The most likely single change of level in a series (per-cycle values in order).
+
+    The noise of one value is the robust scatter of the series' first differences over
+    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
+    about the two levels of the best split (a slow trend is smooth from value to value
+    but no step); the statistic is the likelihood ratio ``(mean_1 - mean_2)^2 / (s^2
+    (1/k + 1/(n - k)))`` of the best split, over its price ``CHANGE_PENALTY ln n``:
+    above 1, the series has two levels (with at least a fifth of the values on each
+    side, values clipped at 4 s from their half's median, a step of at least
+    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by
+    the BIC price of the step's place).
+
+    Returns
+    -------
+    k : int
+        First index of the second part (-1 for fewer than eight values).
+    score : float
+        The statistic over its price.
+    """
+    T, score = _change_profile(v)
+    if not np.any(T > 0):
+        return -1, 0.0
+    return int(np.nanargmax(T)), score
+
+
+@njit(cache=True, error_model="numpy")
+def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
+    """Two regimes along a line: the strongest change of level in its cycles' log drops
+    and log rise rates (:func:`level_change` each), placed where the likelihood ratios
+    of the series that show a change add up to most.
+
+    Returns
+    -------
+    k : int
+        The cycle (row of ``cycles``) whose stick starts the second regime; -1 if none.
+    score : float
+        The strongest series' score (above 1: two regimes).
+    """
+    m = cycles.shape[0] - 1
+    if m < 9:
+        return -1, 0.0
+    total = np.zeros(m - 1)
+    best = 0.0
+    for col in (CY_DROP, CY_RATE):  # not the peaks: a drift or a modulated barrier
+        v = cycles[1:m, col]  # moves them (the first stick starts where the line does)
+        if not np.all(v > 0):
+            continue
+        T, score = _change_profile(np.log(v))
+        if score > 1.0:
+            for i in range(T.size):
+                if T[i] > 0:
+                    total[i] += T[i]
+        best = max(best, score)
+    if best <= 1.0 or not np.any(total > 0):
+        return -1, best
+    return int(np.argmax(total)) + 1, best

@@ -182,6 +182,7 @@ def infer(
     temperature_K: float | None = None,
     classical: bool = True,
     check: bool = False,
+    split_changes: bool = False,
     progress: Progress | None = None,
 ) -> InferResult:
     """Run an estimator on traces; see the module docstring.
@@ -200,6 +201,11 @@ def infer(
         Add the classical estimator's columns beside a learned estimator's.
     check : bool
         Posterior predictive check of every estimated trace (``gof``, ``ppc_flag``).
+    split_changes : bool
+        Estimate the two parts of every trace that the verdict finds changing part-way
+        (``change_nm``, a tip change) separately too, where each part holds at least
+        :data:`MIN_SPLIT_FRACTION` of the trace: one more row each, named ``<trace>
+        [x < c nm]`` and ``<trace> [x >= c nm]``.
     progress : callable, optional
         Called with the number of traces checked so far (long checks).
     """
@@ -207,6 +213,14 @@ def infer(
     flags = {"lattice_nm": lattice_nm, "velocity_nm_per_s": velocity_nm_per_s,
              "temperature_K": temperature_K}  # fmt: skip
     table = estimator.predict(traces, **flags)
+    if split_changes:
+        parts = split_at_changes(table.rows, traces)
+        if parts:
+            table.rows.extend(estimator.predict(parts, **flags).rows)
+            traces.extend(parts)
+            table.notes.append(f"{len(parts) // 2} trace(s) change part-way: each part "
+                               "estimated on its own too (rows '<trace> [x < c nm]', "
+                               "'[x >= c nm]')")  # fmt: skip
     # both scan directions of a map line: the pair's friction, free of the offset
     n_pairs = add_pair_columns(table.rows, traces)
     if n_pairs:
@@ -234,6 +248,31 @@ def infer(
     result.read_errors = list(read_errors)
     add_map_groups(result)
     return result
+
+
+#: The least share of a trace's samples each part of a split needs (``--split-changes``):
+#: a few cycles on each side, as the verdict's change check asks for a fifth of them.
+MIN_SPLIT_FRACTION = 0.2
+
+
+def split_at_changes(rows: Sequence[dict[str, Any]], traces: Sequence[Trace]) -> list[Trace]:
+    """The two parts of every trace whose row says it changes part-way (``change_nm``),
+    where each part holds at least :data:`MIN_SPLIT_FRACTION` of the samples; map
+    metadata (line, direction) is left off so that the parts join no map's answer."""
+    parts: list[Trace] = []
+    for row, t in zip(rows, traces, strict=False):
+        c = row.get("change_nm")
+        if c is None or not np.isfinite(c):
+            continue
+        left = np.asarray(t.x_nm) < c
+        if min(left.mean(), 1.0 - left.mean()) < MIN_SPLIT_FRACTION:
+            continue
+        meta = {k: v for k, v in t.meta.items() if k not in ("line", "direction")}
+        for mask, label in ((left, f"x < {c:.2f} nm"), (~left, f"x >= {c:.2f} nm")):
+            parts.append(Trace(x_nm=np.asarray(t.x_nm)[mask],
+                               force_nN=np.asarray(t.force_nN)[mask],
+                               name=f"{t.name} [{label}]", source=t.source, meta=meta))  # fmt: skip
+    return parts
 
 
 #: The column that says why a map line was left out of its map's pooled answer.
