@@ -27,6 +27,8 @@ def _pct(x: float) -> str:
 def _stress(doc: dict) -> list[str]:
     date = doc["machine"]["date"][:10]
     quick = " --quick" if doc.get("quick") else ""
+    shift = min(doc["seeds"].values()) - 3901  # the corpus's first draw starts at 3901
+    quick += f" --seed-shift {shift}" if shift else ""
     cmd = f"`python benchmarks/classical_stress.py{quick} --json FILE`"
     head = (f"Measured {date} ({doc['machine']['cpu_count']} cores, "
             f"numba threads {doc['machine']['numba_threads']}, commit "
