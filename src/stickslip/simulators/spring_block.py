@@ -68,8 +68,27 @@ RK_RATE_STEP = 1.0
 STRENGTH_TABLE = 1 << 16
 
 
+class _Thresholds:
+    """The static threshold and the dynamic friction of a law with ``mu_static``,
+    ``mu_dynamic`` and ``normal_force_N``."""
+
+    mu_static: float
+    mu_dynamic: float
+    normal_force_N: float
+
+    @property
+    def static_N(self) -> float:
+        """Static threshold ``F_s = mu_s N`` (N)."""
+        return self.mu_static * self.normal_force_N
+
+    @property
+    def dynamic_N(self) -> float:
+        """Dynamic (high-speed) friction ``F_d = mu_d N`` (N)."""
+        return self.mu_dynamic * self.normal_force_N
+
+
 @dataclass(frozen=True)
-class Coulomb:
+class Coulomb(_Thresholds):
     """Coulomb friction: static threshold ``mu_static N``, dynamic ``mu_dynamic N``.
 
     Parameters
@@ -84,16 +103,6 @@ class Coulomb:
     mu_dynamic: float
     normal_force_N: float
 
-    @property
-    def static_N(self) -> float:
-        """Static threshold ``F_s = mu_s N`` (N)."""
-        return self.mu_static * self.normal_force_N
-
-    @property
-    def dynamic_N(self) -> float:
-        """Dynamic friction ``F_d = mu_d N`` (N)."""
-        return self.mu_dynamic * self.normal_force_N
-
     def check(self) -> None:
         if not (self.mu_static > self.mu_dynamic >= 0 and self.normal_force_N > 0):
             raise ValueError(f"need mu_static > mu_dynamic >= 0 and N > 0: {self}")
@@ -103,7 +112,7 @@ class Coulomb:
 
 
 @dataclass(frozen=True)
-class VelocityWeakening:
+class VelocityWeakening(_Thresholds):
     """Friction falling smoothly with slip speed: ``N (mu_d + (mu_s - mu_d)/(1 + |u|/u_c))``.
 
     Parameters
@@ -120,14 +129,6 @@ class VelocityWeakening:
     mu_dynamic: float
     velocity_scale_m_per_s: float
     normal_force_N: float
-
-    @property
-    def static_N(self) -> float:
-        return self.mu_static * self.normal_force_N
-
-    @property
-    def dynamic_N(self) -> float:
-        return self.mu_dynamic * self.normal_force_N
 
     def check(self) -> None:
         if not (self.mu_static > self.mu_dynamic >= 0 and self.normal_force_N > 0
