@@ -27,7 +27,7 @@ test: $(STAMP)
 # the docs site, strictly (any warning fails), executing the tutorials; then site/
 docs: $(STAMP)
 	$(BIN)/python scripts/docs_api.py
-	DISABLE_MKDOCS_2_WARNING=true PATH="$(abspath $(BIN)):$$PATH" NUMBA_NUM_THREADS=$${NUMBA_NUM_THREADS:-2} $(BIN)/mkdocs build --strict --site-dir build/site
+	NO_MKDOCS_2_WARNING=1 PATH="$(abspath $(BIN)):$$PATH" NUMBA_NUM_THREADS=$${NUMBA_NUM_THREADS:-2} $(BIN)/mkdocs build --strict --site-dir build/site
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
