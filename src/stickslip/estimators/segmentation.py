@@ -121,6 +121,18 @@ def _line(P: np.ndarray, s: int, t: int) -> tuple[float, float, float]:
     return max(rss, 0.0), slope, sy / L
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _rss(P: np.ndarray, s: int, t: int) -> float:
+    """:func:`_line`'s RSS alone (the same arithmetic): PELT's inner loop needs no more."""
+    L = t - s
+    if L < 3:
+        return 0.0
+    sy = P[0, t] - P[0, s]
+    sxy = (P[1, t] - P[1, s]) - 0.5 * (s + t - 1) * sy
+    rss = (P[2, t] - P[2, s]) - sy * sy / L - sxy * (sxy / (L * (L * L - 1.0) / 12.0))
+    return max(rss, 0.0)
+
+
 @njit(cache=True, error_model="numpy")
 def _pelt(P: np.ndarray, lo: int, hi: int, beta: float, starts: np.ndarray) -> int:
     """Exact penalised segmentation of ``lo..hi-1`` (PELT); segment starts into ``starts``."""
@@ -137,7 +149,7 @@ def _pelt(P: np.ndarray, lo: int, hi: int, beta: float, starts: np.ndarray) -> i
         arg = 0
         for j in range(nc):
             s = cands[j]
-            v = cost[s] + _line(P, lo + s, lo + t)[0] + beta
+            v = cost[s] + _rss(P, lo + s, lo + t) + beta
             vals[j] = v
             if v < best:
                 best = v
