@@ -9,11 +9,13 @@ The fit
     1. **Segmentation.** The line is cut into straight segments by penalised least
        squares: the cut points minimise ``sum_j RSS_j / sigma^2 + beta (segments)``,
        found exactly by PELT (Killick, Fearnhead and Eckley 2012) with O(1) segment
-       costs from prefix sums (at least the quantisation noise of a digitised line,
-       its step over sqrt(12)). ``sigma`` is the white-noise level of the line's own
-       second differences (MAD), re-estimated once from the fit's residuals where they
-       show more (correlated noise); ``beta = 3 ln n``, the BIC price of a segment's
-       three parameters (start, level, slope). Segments of at most two samples have no
+       costs from prefix sums. ``sigma`` is the line's own noise: the smaller of the
+       robust (MAD) scatters of its second and first differences, then re-estimated
+       from the fit's residuals until it settles (correlated noise shows more in the
+       residuals; slips at a few samples each inflate the differences), and never
+       below a digitised line's quantisation noise (its step over sqrt(12));
+       ``beta = 3 ln n``, the BIC price of a segment's three parameters (start,
+       level, slope). Segments of at most two samples have no
        residual, so they carry no evidence of a line: where the neighbours on either
        side meet without a gap, such a segment is a spike and drops out.
     2. **Sticks and slips.** The fitted polyline (its segment ends and the jumps
@@ -25,7 +27,9 @@ The fit
        fast. Per cycle, ``R_down`` is the mean fall rate of the slip over the mean rise
        rate of the stick before it, and ``R_up`` the mean rise rate over the mean fall
        rate; a slip inside one sample interval is averaged over two, so a fall (rise)
-       counts one interval less than it spans. A sawtooth has ``R_down`` about the
+       counts one interval less than it spans, and where the detector's response
+       trails after a slip its steepest piece counts. The medians over the cycles are
+       weighted by the drops. A sawtooth has ``R_down`` about the
        samples per slip and ``R_up`` about 1 or less; a sine has both about 1; a
        reversed sawtooth only a large ``R_up``. Stick-slip needs the median ``R_down >=
        2.5`` and ``R_up < 2.5`` (:data:`STICK_RATIO`), between a sine's 1 and the 3 of
