@@ -30,18 +30,18 @@ and the row's estimate, so they hold for every estimator:
    sawtooth that does the opposite is ``"sawtooth reversed"`` (a retrace read without
    its sign flip, a trace read backwards), and jumps both ways (a square wave,
    telegraph noise) are ``"jumps up as well as down"``;
-3. change: the line is one regime: no change of level, part-way along it, in its
-   slips' log drops or its sticks' log rise rates
-   (:func:`~stickslip.estimators.segmentation.level_change`: a likelihood ratio over
-   its price, at least a fifth of the cycles on each side and a 10 % step) --
-   ``"the line changes part-way (at x = ... nm): two regimes"``;
-4. spacing: the lower quartile of the distances between consecutive slips at least
+3. spacing: the lower quartile of the distances between consecutive slips at least
    :data:`MIN_SPACING` lattice spacings of the stated lattice. Slips are one (single
    slip) or several (multiple slip) lattice spacings apart; closer ones mean the stated
    lattice is wrong or the drops are not slips -- ``"slips closer than one lattice
    spacing"``, or, where the slips' drops are of unequal sizes (robust spread above
    :data:`UNEQUAL_DROPS` of their median), ``"several unequal slips per lattice period:
    more than one contact"``;
+4. change: the line is one regime: no change of level, part-way along it, in its
+   slips' log drops or its sticks' log rise rates
+   (:func:`~stickslip.estimators.segmentation.cycle_change`: a likelihood ratio over
+   its price, at least a fifth of the cycles on each side and a 10 % step) --
+   ``"the line changes part-way (at x = ... nm): two regimes"``;
 5. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
    the estimate's own uncertainty (the window is missed when the whole 95 % interval,
    else ``eta +- 2 eta_std``, else the value, lies outside it) -- ``"eta below the
@@ -143,7 +143,7 @@ UNEQUAL_DROPS = 0.3
 def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
     n = F.size
     out[:] = np.nan
-    out[NOISE] = white_sigma(F)
+    out[NOISE] = white_sigma(F)  # also the segmentation's start
     out[SPAN] = 0.0
     if n < 4:
         out[N_DROPS] = 0
@@ -163,7 +163,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         out[SPAN] = top - bottom
     # the classical estimator's segmentation: a cycle's fall is a slip where it is fast
     # against the stick's rise, its rise a sudden jump up where that is fast instead
-    cycles, _, _ = sg.find_cycles(F)
+    cycles, _, _ = sg.find_cycles(F, out[NOISE])
     m = cycles.shape[0] - 1
     pos = np.empty(max(m, 0))
     nd = 0
@@ -224,7 +224,7 @@ class TraceChecks:
         2-98 % range of the linearly detrended force.
     change_score : ndarray
         The strongest change of level along the line's cycles, over its price
-        (:func:`~stickslip.estimators.segmentation.level_change`; above 1: two regimes).
+        (:func:`~stickslip.estimators.segmentation.cycle_change`; above 1: two regimes).
     change_nm : ndarray
         Where that change is: the start of the first stick of the second regime (NaN
         without eight cycles).

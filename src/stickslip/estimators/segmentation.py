@@ -78,8 +78,8 @@ PARAMS_PER_SEGMENT = 3.0
 
 # columns of the cycle table returned by `find_cycles`
 (CY_LO, CY_HI, CY_SLOPE_LO, CY_SLOPE_HI, CY_PEAK, CY_VALLEY, CY_DROP, CY_R_DOWN,
- CY_R_UP, CY_TOP, CY_RATE) = range(11)  # fmt: skip
-N_CY_COLS = 11
+ CY_R_UP, CY_RATE) = range(10)  # fmt: skip
+N_CY_COLS = 10
 #: A change of level along a series of per-cycle values counts where its likelihood
 #: ratio exceeds this many ln(n). White series of 20-300 values pass 15 ln(n) far less
 #: than 1 % of the time; lab-like lines (gain drift, telegraph steps, detector effects:
@@ -463,13 +463,16 @@ def _residual_sigma(y: np.ndarray, starts: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def find_cycles(F: np.ndarray) -> tuple[np.ndarray, int, float]:
+def find_cycles(F: np.ndarray, white: float = -1.0) -> tuple[np.ndarray, int, float]:
     """Sticks and slips of one line (the module docstring's steps 1-3, 5).
 
     Parameters
     ----------
     F : ndarray (n,)
         Force samples (any unit).
+    white : float
+        :func:`~stickslip.robust.white_sigma` of ``F`` where the caller has it
+        (negative: computed).
 
     Returns
     -------
@@ -496,7 +499,7 @@ def find_cycles(F: np.ndarray) -> tuple[np.ndarray, int, float]:
     # noise, the first differences (most of them on sticks) less so; the residuals'
     # noise then settles where the segmentation explains the line
     d1 = y[1:] - y[:-1]
-    s = min(white_sigma(y), mad_sigma(d1) / np.sqrt(2.0))
+    s = min(white if b == 1 and white >= 0 else white_sigma(y), mad_sigma(d1) / np.sqrt(2.0))
     # the converter's step is noise too: a digitised line's levels are no segments
     floor = quantum_sigma(F) / np.sqrt(b)
     s = max(s, floor)
@@ -540,7 +543,6 @@ def find_cycles(F: np.ndarray) -> tuple[np.ndarray, int, float]:
         out[m, CY_PEAK] = vi[p]
         out[m, CY_VALLEY] = vi[nxt]
         out[m, CY_DROP] = fall
-        out[m, CY_TOP] = vv[p]
         if rise_len > 0:
             out[m, CY_RATE] = rise / rise_len
         # mean rates; a slip inside a sample interval is averaged over two of them,
@@ -653,9 +655,19 @@ def baseline(x: np.ndarray, F: np.ndarray, cycles: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
-    """The likelihood ratio of a change of level before each index of ``v`` (NaN where
-    not tried), already judged against the scatter about the best split's two levels,
-    and the series' score (:func:`level_change`)."""
+    """The likelihood ratio of a single change of level before each index of a series
+    (per-cycle values in order; NaN where not tried), and the series' score.
+
+    The noise of one value is the robust scatter of the series' first differences over
+    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
+    about the two levels of the best split (a slow trend is smooth from value to value
+    but no step); the ratio is ``(mean_1 - mean_2)^2 / (s^2 (1/k + 1/(n - k)))``. The
+    score is the best split's ratio over its price ``CHANGE_PENALTY ln n``: above 1, the
+    series has two levels (with at least a fifth of the values on each side, values
+    clipped at 4 s from their half's median, a step of at least
+    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by the
+    BIC price of the step's place); 0 for fewer than eight values.
+    """
     n = v.size
     T = np.full(n, np.nan)
     if n < 8:
@@ -713,36 +725,9 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 @njit(cache=True, error_model="numpy")
-def level_change(v: np.ndarray) -> tuple[int, float]:
-    """The most likely single change of level in a series (per-cycle values in order).
-
-    The noise of one value is the robust scatter of the series' first differences over
-    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
-    about the two levels of the best split (a slow trend is smooth from value to value
-    but no step); the statistic is the likelihood ratio ``(mean_1 - mean_2)^2 / (s^2
-    (1/k + 1/(n - k)))`` of the best split, over its price ``CHANGE_PENALTY ln n``:
-    above 1, the series has two levels (with at least a fifth of the values on each
-    side, values clipped at 4 s from their half's median, a step of at least
-    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by
-    the BIC price of the step's place).
-
-    Returns
-    -------
-    k : int
-        First index of the second part (-1 for fewer than eight values).
-    score : float
-        The statistic over its price.
-    """
-    T, score = _change_profile(v)
-    if not np.any(T > 0):
-        return -1, 0.0
-    return int(np.nanargmax(T)), score
-
-
-@njit(cache=True, error_model="numpy")
 def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
     """Two regimes along a line: the strongest change of level in its cycles' log drops
-    and log rise rates (:func:`level_change` each), placed where the likelihood ratios
+    and log rise rates (:func:`_change_profile` each), placed where the likelihood ratios
     of the series that show a change add up to most.
 
     Returns

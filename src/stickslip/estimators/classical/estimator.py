@@ -41,7 +41,7 @@ from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
-from stickslip.robust import mad_sigma, median, percentile, white_sigma
+from stickslip.robust import mad_sigma, median, percentile
 from stickslip.units import EV_TO_NN_NM
 
 PAPER_MASS_KG = 1e-12
@@ -104,11 +104,8 @@ def _spread(v: np.ndarray) -> float:
 @njit(cache=True, error_model="numpy", inline="always")
 def _estimate_one(x: np.ndarray, F: np.ndarray, a: float, T: float, v: float,
                   mass_kg: float, gamma: float, out: np.ndarray) -> None:  # fmt: skip
-    tol = white_sigma(F)
-    cycles, block, s_fit = sg.find_cycles(F)
     # the sticks are fitted on the line less its baseline (zero-mean: <F> is kept)
-    G = F - sg.baseline(x, F, cycles)
-    segs, slp = sl.fit_sticks(x, G, cycles, tol)
+    G, segs, slp, cycles, block, s_fit, tol = sl.fit_line(x, F)
     _estimate_core(x, F, G, segs, slp, cycles, block, s_fit, tol, a, T, v, mass_kg, gamma, out)
 
 

@@ -234,6 +234,19 @@ def fit_sticks(x: np.ndarray, F: np.ndarray, cycles: np.ndarray, tol: float
 
 
 @njit(cache=True, error_model="numpy")
+def fit_line(x: np.ndarray, F: np.ndarray) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float, float]:  # fmt: skip
+    """Segment a line, take its baseline off and fit its sticks: the line less its
+    baseline, the stick and slip tables, the cycles, the block size, the segmentation's
+    noise, and the fits' tolerance (:func:`white_sigma` of the line)."""
+    tol = white_sigma(F)
+    cycles, block, sigma = sg.find_cycles(F, tol)
+    G = F - sg.baseline(x, F, cycles)  # zero-mean: <F> is kept
+    segs, slips = fit_sticks(x, G, cycles, tol)
+    return G, segs, slips, cycles, block, sigma, tol
+
+
+@njit(cache=True, error_model="numpy")
 def analyse_segments(x: np.ndarray, F: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:  # fmt: skip
     """Segment a line, take its baseline off and fit its sticks.
@@ -253,10 +266,7 @@ def analyse_segments(x: np.ndarray, F: np.ndarray
     sigma : float
         Noise per block mean that the segmentation used.
     """
-    tol = white_sigma(F)
-    cycles, block, sigma = sg.find_cycles(F)
-    G = F - sg.baseline(x, F, cycles)
-    segs, slips = fit_sticks(x, G, cycles, tol)
+    _, segs, slips, cycles, block, sigma, _ = fit_line(x, F)
     return segs, slips, cycles, block, sigma
 
 
