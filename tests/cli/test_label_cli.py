@@ -86,6 +86,7 @@ def test_bad_inputs_are_reported_and_the_rest_labelled(good_dir, tmp_path):
     [
         ["label", "x.csv"],  # no --out
         ["label", "x.csv", "--out", "o.csv", "--lattice", "0"],
+        ["label", "x.csv", "--out", "o.csv", "--lattice", "246"],  # pm, not nm
         ["label", "x.csv", "--out", "o.csv", "--temperature", "-1"],
         ["label", "x.csv", "--out", "o.csv", "--velocity", "abc"],
     ],
@@ -107,3 +108,43 @@ def test_smooth_trace_is_flagged_not_failed(tmp_path):
     row = _rows(out)[0]
     assert row["regime"] == "smooth" and row["quality"] == "smooth sliding"
     assert not np.isnan(float(row["F_mean_nN"]))
+
+
+def test_nonsense_trace_is_refused_with_its_reason_and_no_warning(good_dir, tmp_path):
+    """Forces of 1e30 nN: one error line saying why, no number written, no warning."""
+    r = simulate([2.0], [20.0], PhysicalSettings(), seed=4)
+    write_trace_csv(tmp_path / "huge.csv", r.x_nm, r.force_nN[0] * 1e30)
+    out = tmp_path / "labels.csv"
+    res = runner.invoke(app, ["label", str(tmp_path / "huge.csv"), str(good_dir / "good0.csv"),
+                              "--out", str(out)])  # fmt: skip
+    assert res.exit_code == 1, res.output
+    assert "Warning" not in res.output and "overflow" not in res.output
+    err = [ln for ln in res.stderr.splitlines() if "error:" in ln]
+    assert len(err) == 1 and "huge: force outside any physical range" in err[0]
+    rows = {row["trace"]: row for row in _rows(out)}
+    assert rows["huge"]["U0_eV"] == "" and rows["good0"]["quality"] == "ok"
+
+
+@pytest.mark.parametrize(("flag", "shown"), [([], False), (["-v"], True)])
+def test_warnings_become_status_lines_under_verbose(tmp_path, monkeypatch, flag, shown):
+    """A library warning raised during a command reaches the terminal only with -v, once."""
+    import warnings
+
+    import stickslip.jobs.infer as inf
+
+    real = inf.read_inputs
+
+    def noisy(*args, **kwargs):
+        for _ in range(3):
+            warnings.warn("overflow encountered in exp", RuntimeWarning, stacklevel=1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(inf, "read_inputs", noisy)
+    (tmp_path / "a.csv").write_text("x_nm,force_nN\n")
+    res = runner.invoke(app, [*flag, "label", str(tmp_path / "a.csv"), "--out",
+                              str(tmp_path / "o.csv")])  # fmt: skip
+    lines = [ln for ln in res.stderr.splitlines() if "overflow" in ln]
+    assert len(lines) == (1 if shown else 0)  # once, not three times
+    if shown:
+        assert lines[0].startswith("warning: RuntimeWarning: overflow encountered in exp (")
+    assert "Traceback" not in res.output

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from stickslip.conditions import GRAPHITE, resolve
-from stickslip.estimators.base import Estimator
+from stickslip.estimators.base import Estimator, TraceEstimator
 from stickslip.estimators.load import load_estimator
 from stickslip.estimators.table import (
     CONDITION_COLUMNS,
@@ -90,6 +90,60 @@ def test_a_refused_trace_is_a_row_with_its_reason(traces):
         row = load_estimator(name).predict(traces).rows[-1]
         assert row["trace"] == "short" and row["quality"] != "ok" and "U0_eV" not in row
         assert "short" in row["quality"] or "pixel" in row["quality"]
+
+
+def test_nonsense_forces_and_positions_are_refused_with_a_reason(estimator, traces, recwarn):
+    """Forces of 1e30 nN, a scan of 0.01 nm or 2e5 nm, positions that are NaN or go back,
+    a lattice stated in pm: every estimator refuses them, saying why, and warns nothing."""
+    t = traces[0]
+    bad_x = t.x_nm.copy()
+    bad_x[5] = np.nan
+    cases = {
+        "huge": Trace(t.x_nm, t.force_nN * 1e30, "huge"),
+        "tiny": Trace(t.x_nm * 1e-3, t.force_nN, "tiny"),
+        "long": Trace(t.x_nm * 2e4, t.force_nN, "long"),
+        "nan_x": Trace(bad_x, t.force_nN, "nan_x"),
+        "back": Trace(t.x_nm[::-1].copy(), t.force_nN, "back"),
+        "pm": Trace(t.x_nm, t.force_nN, "pm", meta={"lattice_nm": 246.0}),
+    }
+    words = {"huge": "force outside any physical range", "tiny": "too short",
+             "long": "scan length outside", "nan_x": "NaN", "back": "not strictly increasing",
+             "pm": "lattice spacing outside any physical range"}  # fmt: skip
+    rows = estimator.predict([t, *cases.values()]).rows
+    assert rows[0]["quality"] == "ok"
+    for row in rows[1:]:
+        assert row["quality"] != "ok" and words[row["trace"]] in row["quality"], row["quality"]
+        assert "U0_eV" not in row and len(row["quality"].split()) >= 4
+        if estimator.domain_verdict:
+            assert row["in_domain"] is False
+    assert "e+30 nN" in rows[1]["quality"] and "from the file" in rows[-1]["quality"]
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+class _Overflowing(TraceEstimator):
+    """An estimator whose numbers overflow (what a line far outside a model's reach gives)."""
+
+    name = "overflowing"
+    intervals = True
+    bad = "U0_eV"
+
+    def estimate(self, traces, conditions):
+        res = {k: 1.0 for k in TARGETS} | {k: 0.1 for k in STD_COLUMNS}
+        res |= {f"{k}_{b}": v for k in TARGETS for b, v in (("lo68", 0.9), ("hi68", 1.1),
+                                                            ("lo95", 0.8), ("hi95", 1.2))}
+        res[self.bad] = float("inf")
+        return [dict(res) for _ in traces], []
+
+
+@pytest.mark.parametrize("bad", ["U0_eV", "K_N_m_std", "eta_hi95", "F_mean_nN_lo68"])
+def test_a_nonfinite_estimate_is_never_ok(traces, bad):
+    est = _Overflowing()
+    est.bad = bad
+    row = est.predict(traces[:1]).rows[0]
+    assert row["quality"].startswith("the estimate is not a finite number")
+    assert bad in row["quality"] and "U0_eV" not in row
+    assert row["in_domain"] is False and row["domain_reason"] == f"no estimate: {row['quality']}"
+    assert row["lattice_nm"] == GRAPHITE.lattice_nm and row["file"] == "sim.h5"
 
 
 def test_table_files_follow_the_extension(traces, tmp_path):

@@ -1,13 +1,19 @@
 """Fuzzing: mutated real files and random bytes give traces or one-line TraceReadErrors.
 
 Nothing else may escape :func:`collect_traces`, and nothing may hang (each example
-runs under a SIGALRM watchdog).
+runs under a SIGALRM watchdog). Every reason is a sentence, and the traces that do read
+give, through the classical estimator and the default line estimator, rows that are
+``ok`` with finite numbers or refused with a sentence: the property of
+``benchmarks/fuzz_inputs.py`` (its generator and checks, loaded from there), on
+:data:`N_FAST` inputs by default and on 10,000 under ``-m slow``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import signal
+import sys
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,9 +27,24 @@ from hypothesis import strategies as st
 
 from stickslip.traces import Trace, TraceReadError, collect_traces
 
-RAMP = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "bruker-friction-ramp"
+ROOT = Path(__file__).resolve().parents[2]
+RAMP = ROOT.parent / "shared" / "data" / "bruker-friction-ramp"
 
-SUFFIXES = [".spm", ".000", ".nid", ".ibw", ".gwy", ".csv", ".txt", ".npy", ".h5"]
+SUFFIXES = [".spm", ".000", ".nid", ".ibw", ".gwy", ".mdt", ".jpk", ".csv", ".txt", ".npy", ".h5"]
+N_FAST = 1200  # inputs of the default run (~20 s on 2 cores); the full run: -m slow
+
+
+def _bench():
+    """benchmarks/fuzz_inputs.py as a module (the one generator and set of checks)."""
+    spec = importlib.util.spec_from_file_location("fuzz_inputs", ROOT / "benchmarks"
+                                                  / "fuzz_inputs.py")  # fmt: skip
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+FUZZ = _bench()
 WATCHDOG_S = 10
 
 
@@ -119,6 +140,7 @@ def _check(files: list[tuple[str, bytes]]) -> None:
         for e in errors:
             assert isinstance(e, TraceReadError)
             assert "\n" not in str(e) and str(e).startswith(e.path)
+            assert FUZZ.is_sentence(e.reason), e.reason
         # every file yields traces or exactly one error
         assert len({e.path for e in errors}) == len(errors) <= len(paths)
 
@@ -139,3 +161,40 @@ def test_seeds_themselves_read():
             p.write_bytes(SEEDS[suffix])
             traces, errors = collect_traces([p])
             assert traces and not errors, (suffix, errors)
+
+
+@pytest.mark.parametrize(("text", "ok"), [
+    ("the file is empty", True), ("too noisy", True),
+    ("KeyError: 'DataSet'", False), ("UnicodeDecodeError", False),
+    ("cannot read (KeyError: 'DataSet')", False), ("", False), (None, False),
+])
+def test_is_sentence(text, ok):
+    assert FUZZ.is_sentence(text) is ok
+
+
+def test_generated_inputs_are_reproducible():
+    a = list(FUZZ.generate(40, seed=3))
+    assert a == list(FUZZ.generate(40, seed=3)) and a != list(FUZZ.generate(40, seed=4))
+    assert len({Path(n).suffix for n, _ in a}) >= 8  # the formats in turn
+
+
+def _assert_clean(counts) -> None:
+    assert counts.failures() == 0, counts.problems
+    assert counts.warnings == 0, counts.problems
+    # the run exercised both sides of the property
+    assert counts.read and counts.read_errors and counts.rows_ok and counts.rows_refused
+
+
+def test_fuzzed_inputs_give_finite_answers_or_sentences():
+    """N_FAST generated files: read, estimated (classical and line) where they read."""
+    counts = FUZZ.run(N_FAST, seed=41)
+    assert counts.inputs == N_FAST
+    _assert_clean(counts)
+
+
+@pytest.mark.slow
+def test_fuzzed_inputs_ten_thousand():
+    """The issue's target: 10,000 inputs, no crash, no non-finite ok row, sentences only."""
+    counts = FUZZ.run(10_000, seed=41)
+    assert counts.inputs == 10_000
+    _assert_clean(counts)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import struct
 import sys
 from pathlib import Path
 
@@ -20,7 +22,9 @@ from stickslip.traces.formats import (
     reader_options,
     summarise_by_load,
 )
+from stickslip.traces.formats.common import damage_reason
 from stickslip.traces.readers import read_file, read_scan
+from stickslip.traces.trace import read_notes
 
 N = 64
 
@@ -101,6 +105,83 @@ def test_bad_text_gives_one_line_reason(tmp_path, text, reason):
     traces, errors = collect_traces([p])
     assert not traces and len(errors) == 1
     assert reason in str(errors[0]) and "\n" not in str(errors[0])
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_european_csv_with_decimal_commas_reads_as_the_comma_csv(tmp_path, sep):
+    """A European-locale spreadsheet export (``;`` or tab between the columns, decimal
+    commas) gives the same trace as the plain CSV, and says how it was read."""
+    x, f = np.arange(N) * 0.0215, 0.1234 + np.sin(np.arange(N) / 3.0)
+    plain = _write(tmp_path / "plain.csv", "x_nm,force_nN\n" + "".join(
+        f"{a:.4f},{b:.4f}\n" for a, b in zip(x, f, strict=True)))
+    euro = _write(tmp_path / "euro.csv", f"x_nm{sep}force_nN\n" + "".join(
+        f"{a:.4f}{sep}{b:.4f}\n".replace(".", ",") for a, b in zip(x, f, strict=True)))
+    (p,), (e,) = read_file(plain), read_file(euro)
+    np.testing.assert_array_equal(e.x_nm, p.x_nm)
+    np.testing.assert_array_equal(e.force_nN, p.force_nN)
+    assert e.force_nN[0] == pytest.approx(0.1234)
+    name = {";": "semicolon", "\t": "tab"}[sep]
+    assert e.meta["read_note"] == f"read as {name}-separated with decimal commas"
+    assert "read_note" not in p.meta
+    assert read_notes([p, e, e]) == [f"{euro}: read as {name}-separated with decimal commas"]
+
+
+def test_semicolon_csv_with_decimal_points_and_comma_csv_are_unchanged(tmp_path):
+    x = np.arange(N) * 0.5
+    semi = _write(tmp_path / "semi.csv", "x_nm;force_nN\n" + "".join(
+        f"{a};{a / 10}\n" for a in x))
+    (t,) = read_file(semi)
+    np.testing.assert_allclose(t.force_nN, x / 10) and "read_note" not in t.meta
+    # a comma CSV whose cells hold no decimals is never read as decimal commas
+    ints = _write(tmp_path / "ints.csv", "x_nm,force_nN\n" + "".join(
+        f"{i},{i % 7}\n" for i in range(N)))
+    (t,) = read_file(ints)
+    assert t.x_nm[-1] == N - 1 and "read_note" not in t.meta
+
+
+def test_european_csv_note_reaches_the_run(tmp_path):
+    from stickslip.estimators.classical.estimator import ClassicalEstimator
+
+    x = np.arange(N) * 0.0215
+    euro = _write(tmp_path / "euro.csv", "x_nm;force_nN\n" + "".join(
+        f"{a:.4f};{b:.4f}\n".replace(".", ",") for a, b in zip(x, np.sin(x * 9), strict=True)))
+    table = ClassicalEstimator().predict(read_file(euro))
+    assert f"{euro}: read as semicolon-separated with decimal commas" in table.notes
+    assert "read_note" not in table.columns
+
+
+@pytest.mark.parametrize(("suffix", "body", "words"), [
+    (".nid", b"[DataSet]\nVersion=2\n\xff\xfe garbage",
+     "a part every Nanosurf NID file has is missing (no 'DataSet')"),
+    (".gwy", b"GWYP" + b"GwyContainer\x00" + b"\xff" * 64,
+     "the file's body is damaged or not text where a text header was expected"),
+    (".ibw", b"\x05\x00" + b"\x00" * 40, "the file ends early or its Asylum/Igor IBW data"),
+])
+def test_damaged_vendor_file_is_one_sentence(tmp_path, suffix, body, words):
+    """A vendor file whose body is damaged: what is wrong and what to try, the file
+    named, never a bare exception name."""
+    p = tmp_path / f"damaged{suffix}"
+    p.write_bytes(body)
+    with pytest.raises(TraceReadError) as e:
+        read_file(p)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}: ") and "\n" not in msg and words in msg
+    assert "re-export it from the instrument software" in msg
+    assert not re.search(r"\w+(Error|Exception)\b", msg), msg
+
+
+@pytest.mark.parametrize(("error", "words"), [
+    (UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"),
+     "the file's body is damaged or not text where a text header was expected"),
+    (KeyError("DataSet"), "a part every Nanosurf NID file has is missing (no 'DataSet')"),
+    (struct.error("unpack requires a buffer of 4 bytes"), "the file ends early"),
+    (MemoryError(), "the Nanosurf NID header states sizes no real file has"),
+    (RuntimeError("odd"), "not a readable Nanosurf NID file"),
+])
+def test_damage_reasons_are_sentences(tmp_path, error, words):
+    reason = damage_reason(error, tmp_path / "scan.nid")
+    assert reason.startswith(words) and "instrument software" in reason
+    assert type(error).__name__ not in reason
 
 
 def test_npy_layouts(tmp_path):

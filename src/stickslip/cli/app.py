@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 
 from stickslip._version import __version__
-from stickslip.cli.common import set_verbosity
+from stickslip.cli.common import set_verbosity, warnings_as_status_lines
 
 app = typer.Typer(
     name="stickslip",
@@ -27,6 +27,7 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
+    ctx: typer.Context,
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version."
     ),
@@ -36,3 +37,5 @@ def _root(
 ) -> None:
     """stickslip command line."""
     set_verbosity(0 if quiet else 2 if verbose else 1)
+    # for the whole command: warnings become -v status lines, never terminal noise
+    ctx.with_resource(warnings_as_status_lines())

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import warnings
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any, NoReturn
 
 import typer
@@ -79,6 +81,28 @@ def echo(message: str) -> None:
     """Print a result (a table) to stdout; quiet under ``-q``."""
     if VERBOSITY["level"] >= 1:
         typer.echo(message)
+
+
+@contextlib.contextmanager
+def warnings_as_status_lines() -> Iterator[None]:
+    """Route Python warnings raised while a command runs to ``-v`` status lines.
+
+    A library's warning (numpy's ``RuntimeWarning: overflow``, a reader's deprecation)
+    is no message for the user: what it means for a result is in the result (a refused
+    row says why). Each distinct warning is still shown, once, with ``-v``; errors are
+    untouched, and ``python -W error`` still turns warnings into errors.
+    """
+    seen: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
+        text = f"warning: {category.__name__}: {message} ({Path(filename).name}:{lineno})"
+        if text not in seen:
+            seen.add(text)
+            debug(text)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def is_interactive() -> bool:

@@ -36,6 +36,7 @@ import numpy as np
 
 from stickslip.atomic import atomic_path, write_text_atomic
 from stickslip.conditions import QUANTITIES
+from stickslip.traces.trace import READ_NOTE
 from stickslip.units import EV_TO_NN_NM
 
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m", "eta")
@@ -58,7 +59,7 @@ OK = "ok"
 TABLE_SUFFIXES = (".csv", ".json", ".parquet")
 # trace metadata that is not provenance: the unit is a reading detail, the conditions
 # have their own columns
-_SKIP_META = {"unit", "calibrated", "unusable", *QUANTITIES}
+_SKIP_META = {"unit", "calibrated", "unusable", READ_NOTE, *QUANTITIES}
 
 
 class TableFormatError(ValueError):
@@ -308,6 +309,31 @@ def failure_row(name: str, reason: str, estimator: str, file: str | None = None,
         row["file"] = file
     row.update(extra or {})
     return row
+
+
+def _finite(value: Any) -> bool:
+    return (isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, (bool, np.bool_)) and math.isfinite(value))  # fmt: skip
+
+
+def nonfinite_reason(row: Mapping[str, Any], intervals: bool) -> str | None:
+    """Why an estimated row may not be written as ``ok`` (a sentence), or None.
+
+    Every estimate (``F_mean_nN, U0_eV, K_N_m, eta``, or their volt names) must be a
+    finite number, and so must every ``*_std`` the row holds and, for an estimator with
+    ``intervals``, every interval bound: an overflow inside an estimator (a trace far
+    outside what it can read) gives ``inf`` or NaN, never an answer.
+    """
+    names = (*VOLT_TARGETS, TARGETS[3]) if VOLT_NAMES["U0_eV"] in row else TARGETS
+    need = list(names)
+    need += [f"{k}_{b}" for b in BOUNDS for k in names] if intervals else []
+    bad = [c for c in need if not _finite(row.get(c))]
+    bad += [c for k in names if (c := f"{k}_std") in row and not _finite(row[c])]
+    if not bad:
+        return None
+    shown = ", ".join(f"{c} = {row.get(c)}" for c in bad[:3]) + (", ..." if len(bad) > 3 else "")
+    return (f"the estimate is not a finite number ({shown}): the trace lies outside what "
+            "this estimator can read; check its units and conditions")
 
 
 def read_table(path: str | os.PathLike) -> list[dict[str, str]]:

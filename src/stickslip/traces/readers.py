@@ -17,7 +17,7 @@ from typing import Any
 
 from stickslip.traces.formats.asylum import read_ibw
 from stickslip.traces.formats.bruker import read_bruker
-from stickslip.traces.formats.common import ScanFile
+from stickslip.traces.formats.common import ScanFile, damage_reason
 from stickslip.traces.formats.gwyddion import read_gwy
 from stickslip.traces.formats.hdf5 import read_h5
 from stickslip.traces.formats.jpk import read_jpk
@@ -78,8 +78,7 @@ def _guarded(path: Path, fn: Callable[[], Any]) -> Any:
     except TraceReadError:
         raise
     except Exception as e:  # a reader bug or a malformed file must never crash the batch
-        reason = " ".join(str(e).split())[:200]
-        raise TraceReadError(path, f"cannot read ({type(e).__name__}: {reason})") from None
+        raise TraceReadError(path, damage_reason(e, path)) from None
 
 
 def _existing(path: str | os.PathLike) -> Path:

@@ -145,7 +145,10 @@ def processed_slopes(win: np.ndarray, pixel_nm: float, sigma: float = 15.0) -> n
     """
     r = np.maximum(np.diff(win, axis=-1) / pixel_nm, 0.0)
     mu = r.mean(axis=-1, keepdims=True)
-    weighted = r / (1.0 + np.exp(-(r - mu) / sigma))
+    # the exponent capped below the dtype's overflow: a steep slope far above the mean
+    # then weighs ~0, as the sigmoid says, without an overflow warning
+    cap = float(np.log(np.finfo(r.dtype).max)) - 2.0 if r.dtype.kind == "f" else 700.0
+    weighted = r / (1.0 + np.exp(np.minimum(-(r - mu) / sigma, cap)))
     return np.sort(weighted, axis=-1)
 
 

@@ -19,6 +19,7 @@ from stickslip.traces.formats.common import (
     direction_from_name,
     is_lateral_name,
     optional_import,
+    quiet_logger,
     read_bytes,
 )
 from stickslip.traces.trace import TraceReadError
@@ -59,7 +60,8 @@ def read_ibw(path: Path) -> ScanFile:
     if len(head) < 2 or not ({head[0], head[1]} & {1, 2, 3, 5}):
         raise TraceReadError(path, "not an Igor binary wave (bad version field)")
     binarywave = optional_import("igor2.binarywave", path)
-    wave = binarywave.load(str(path))["wave"]
+    with quiet_logger("igor2.binarywave"):  # it logs damaged waves before raising
+        wave = binarywave.load(str(path))["wave"]
     data = np.asarray(wave["wData"])
     if data.ndim == 2:
         data = data[:, :, None]

@@ -9,7 +9,11 @@ a :class:`ScanFile` into per-line :class:`~stickslip.traces.trace.Trace` objects
 from __future__ import annotations
 
 import importlib
+import logging
 import re
+import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -227,6 +231,68 @@ def optional_import(module: str, path: Path, extra: str = "formats") -> ModuleTy
         ) from None
 
 
+#: The format each suffix names, for the sentences of :func:`damage_reason`.
+FORMAT_NAMES = {".spm": "Bruker NanoScope", ".nid": "Nanosurf NID", ".ibw": "Asylum/Igor IBW",
+                ".gwy": "Gwyddion", ".mdt": "NT-MDT", ".jpk": "JPK image", ".csv": "CSV",
+                ".txt": "text", ".npy": "NumPy .npy", ".h5": "HDF5", ".hdf5": "HDF5",
+                ".zarr": "Zarr"}  # fmt: skip
+_RE_EXPORT = "re-export it from the instrument software (or open it there to check it)"
+_WRITE_AGAIN = "write or export it again (a copy may have been cut short)"
+#: Formats the project or a script writes (not an instrument): advice to write them again.
+_WRITTEN = {".csv", ".txt", ".npy", ".h5", ".hdf5", ".zarr"}
+
+
+def damage_reason(error: BaseException, path: Path) -> str:
+    """A sentence saying what an exception raised while reading a file means for the
+    user, and what to try: never a bare exception name.
+
+    A vendor file whose body is damaged makes its parser fail in many ways (a
+    ``UnicodeDecodeError`` in a text header, a ``KeyError`` for a missing section, a
+    ``struct.error`` or ``EOFError`` where the data end early ...); each kind becomes
+    one plain sentence, the parser's own words kept short at the end as a detail.
+    """
+    suffix = path.suffix.lower()
+    fmt = FORMAT_NAMES.get(".spm" if re.match(r"^\.\d{3}$", suffix) else suffix, "this format")
+    detail = " ".join(str(error).split())[:120]
+    if isinstance(error, UnicodeError):
+        what = ("the file's body is damaged or not text where a text header was expected "
+                f"(not a readable {fmt} file)")
+    elif isinstance(error, KeyError):
+        key = detail if len(detail) <= 40 else "entry"  # h5py puts whole sentences in keys
+        what = (f"a part every {fmt} file has is missing (no {key}): the file is damaged, "
+                "cut short, or from a version this reader does not know")
+        detail = "" if key == detail else detail
+    elif isinstance(error, (EOFError, struct.error, IndexError, BufferError)) or (
+            isinstance(error, ValueError) and "buffer" in detail.lower()):  # fmt: skip
+        what = f"the file ends early or its {fmt} data layout is damaged"
+    elif isinstance(error, (MemoryError, OverflowError)):
+        what = f"the {fmt} header states sizes no real file has: the header is damaged"
+        detail = ""
+    elif isinstance(error, PermissionError):
+        return "cannot be opened: permission denied; check the file's permissions"
+    elif isinstance(error, OSError):
+        what = f"cannot be read: the {fmt} file is damaged, cut short or not a file"
+        detail = " ".join(str(error.strerror or error).split())[:120]
+    else:
+        what = (f"not a readable {fmt} file: it is damaged or not in the format its "
+                "suffix says")
+    advice = _WRITE_AGAIN if suffix in _WRITTEN else _RE_EXPORT
+    return f"{what}; {advice}" + (f" (detail: {detail})" if detail else "")
+
+
+@contextmanager
+def quiet_logger(name: str) -> Iterator[None]:
+    """Mute a third-party reader's logger while it reads (it logs damaged files to the
+    terminal): the error reaches the user once, as the reader's one line."""
+    log = logging.getLogger(name)
+    was = log.disabled
+    log.disabled = True
+    try:
+        yield
+    finally:
+        log.disabled = was
+
+
 def read_bytes(path: Path, limit: int | None = None) -> bytes:
     """Read a file (or its first ``limit`` bytes) with one-line errors."""
     try:
@@ -235,7 +301,7 @@ def read_bytes(path: Path, limit: int | None = None) -> bytes:
     except IsADirectoryError:
         raise TraceReadError(path, "is a directory") from None
     except OSError as e:
-        raise TraceReadError(path, f"cannot read ({e.strerror})") from None
+        raise TraceReadError(path, damage_reason(e, path)) from None
 
 
 def as_image(data: Any, path: Path, what: str) -> np.ndarray:

@@ -17,9 +17,6 @@ line naming the extra.
 from __future__ import annotations
 
 import importlib
-import logging
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +28,10 @@ from stickslip.traces.formats.common import (
     Channel,
     ScanFile,
     as_image,
+    damage_reason,
     is_lateral_name,
     optional_import,
+    quiet_logger,
     read_bytes,
 )
 from stickslip.traces.trace import TraceReadError
@@ -50,18 +49,6 @@ TAG_SLOT_NAME = 0x8090
 TAG_ENCODER_UNIT = 0x80A2
 SLOT_STRIDE = 0x30
 _LATERAL_JPK_NAMES = {"hdeflection", "lateraldeflection"}
-
-
-@contextmanager
-def _quiet_tifffile() -> Iterator[None]:
-    """Mute tifffile's logged warnings (damaged files): errors are reported in one line."""
-    log = logging.getLogger("tifffile")
-    was = log.disabled
-    log.disabled = True
-    try:
-        yield
-    finally:
-        log.disabled = was
 
 
 def _tag(page: Any, code: int) -> Any:
@@ -97,9 +84,7 @@ def _channels(path: Path, tifffile: Any) -> list[tuple[str, str, str, str, tuple
                 out.append((str(raw), fancy, direction, _unit(page), shape))
             return out
     except Exception as e:  # tifffile raises many types on damaged files
-        reason = " ".join(str(e).split())[:160]
-        raise TraceReadError(path, f"not a readable JPK image file ({type(e).__name__}: "
-                                   f"{reason})") from None
+        raise TraceReadError(path, damage_reason(e, path)) from None
 
 
 def _display_name(raw: str, fancy: str) -> str:
@@ -127,7 +112,7 @@ def read_jpk(path: Path) -> ScanFile:
     except ImportError:
         pass
     tifffile = optional_import("tifffile", path, extra=EXTRA)
-    with _quiet_tifffile():
+    with quiet_logger("tifffile"):  # its warnings on damaged files
         return _read(path, jpk, tifffile)
 
 
@@ -143,9 +128,8 @@ def _read(path: Path, jpk: Any, tifffile: Any) -> ScanFile:
             try:
                 image, px_nm = jpk.load_jpk(path, channel=f"{raw}_{direction}", flip_image=False)
             except Exception as e:  # AFMReader raises KeyError/ValueError on bad tags
-                reason = " ".join(str(e).split())[:160]
                 raise TraceReadError(path, f"channel {name} ({direction}): "
-                                           f"{type(e).__name__}: {reason}") from None
+                                           f"{damage_reason(e, path)}") from None
             data = as_image(np.asarray(image), path, f"channel {name}")
             shape = data.shape
             if scan.scan_size_nm is None and np.isfinite(px_nm) and px_nm > 0:

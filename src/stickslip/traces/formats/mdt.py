@@ -320,7 +320,8 @@ def _mda_image(buf: bytes, c: _Cursor, frame: Frame, dims: list[_Calibration],
     item = np.dtype(dtype).itemsize
     pos = c.take(nx * ny * item)
     raw = np.frombuffer(buf, dtype=dtype, count=nx * ny, offset=pos)
-    img = (z.bias + z.scale * raw.astype(float)).reshape(ny, nx)
+    with np.errstate(invalid="ignore", over="ignore"):  # damaged cells: NaN, refused later
+        img = (z.bias + z.scale * raw.astype(float)).reshape(ny, nx)
     name, direction = _channel_name(frame.title, frame.index)
     keep = all_data or is_lateral_name(name)
     ch = Channel(name, direction, z.unit, img.shape, img if keep else None)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,7 +32,7 @@ import numpy as np
 
 from stickslip.traces.formats.common import RETRACE, TRACE, Channel, ScanFile, read_bytes
 from stickslip.traces.formats.maps import map_to_traces, to_force
-from stickslip.traces.trace import Trace, TraceReadError, validate_trace
+from stickslip.traces.trace import READ_NOTE, Trace, TraceReadError, validate_trace
 
 NEEDED = "needs columns x_nm,force_nN (or x_nm,force_V, or trace,retrace)"
 FORMAT_LOOP = "friction loop (text)"
@@ -41,28 +42,55 @@ _FORCE_COLS = {"force_nN": "nN", "force_V": "V", "force_mV": "mV"}
 _X_COLS = {"x_nm": 1.0, "x_um": 1e3}
 
 
-def _split(line: str) -> list[str]:
-    for sep in (",", "\t", ";"):
-        if sep in line:
-            return next(csv.reader(io.StringIO(line), delimiter=sep))
-    return line.split()
+_SEPARATORS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
+#: A number written with a decimal comma (``0,1234``, ``-1,5e-3``): European-locale
+#: spreadsheets export these, with ``;`` (or tab) between the columns.
+_DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 
 
-def read_rows(path: Path) -> list[list[str]]:
-    """Non-empty, non-comment rows of a delimited text file, with one-line errors."""
+def _separator(line: str) -> str | None:
+    """The column separator a line uses: ``;`` first (it is never part of a number, and a
+    line with decimal commas holds commas too), then tab, then comma; None: whitespace."""
+    return next((sep for sep in (";", "\t", ",") if sep in line), None)
+
+
+def _split(line: str, sep: str | None) -> list[str]:
+    if sep is None or sep not in line:  # a line without the file's separator: its own
+        sep = _separator(line)
+    if sep is None:
+        return line.split()
+    return next(csv.reader(io.StringIO(line), delimiter=sep))
+
+
+def read_rows(path: Path) -> tuple[list[list[str]], str]:
+    """Non-empty, non-comment rows of a delimited text file, with one-line errors.
+
+    The separator is the first row's (:func:`_separator`). In a file not separated by
+    commas, numbers with a decimal comma (``0,1234``) are read as decimals. Returns
+    the rows and a note saying so (``""`` for a file in the usual layout).
+    """
     raw = read_bytes(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise TraceReadError(path, "not a text file") from None
+        raise TraceReadError(path, "not a text file (it holds bytes that are not UTF-8 "
+                             "text): export the trace as CSV") from None
     if "\x00" in text:
-        raise TraceReadError(path, "not a text file")
+        raise TraceReadError(path, "not a text file (it holds binary zero bytes): export "
+                             "the trace as CSV")
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    rows = [_split(ln) for ln in lines]
-    rows = [[c.strip() for c in r] for r in rows if any(c.strip() for c in r)]
+    if not lines:
+        raise TraceReadError(path, "empty file (no rows besides comments): nothing to read")
+    sep = _separator(lines[0])
+    rows = [[c.strip() for c in _split(ln, sep)] for ln in lines]
+    rows = [r for r in rows if any(r)]
     if not rows:
-        raise TraceReadError(path, "empty file")
-    return rows
+        raise TraceReadError(path, "empty file (no rows besides comments): nothing to read")
+    note = ""
+    if sep != "," and any(_DECIMAL_COMMA.match(c) for r in rows for c in r):
+        rows = [[c.replace(",", ".") if _DECIMAL_COMMA.match(c) else c for c in r] for r in rows]
+        note = f"read as {_SEPARATORS[sep]}-separated with decimal commas"
+    return rows, note
 
 
 def _is_number(s: str) -> bool:
@@ -74,18 +102,32 @@ def _is_number(s: str) -> bool:
 
 
 def _numbers(rows: Sequence[Sequence[str]], ncol: int, path: Path) -> np.ndarray:
-    try:
-        data = np.array([[float(v) for v in r[:ncol]] for r in rows], dtype=float)
-    except ValueError as e:
-        raise TraceReadError(path, f"non-numeric value ({e})") from None
-    if any(len(r) < ncol for r in rows):
-        raise TraceReadError(path, "missing value (a row is shorter than the header)")
-    return data.reshape(-1, ncol)
+    short = next((i for i, r in enumerate(rows) if len(r) < ncol), None)
+    if short is not None:
+        raise TraceReadError(path, f"missing value: data row {short + 1} is shorter than the "
+                             f"header ({len(rows[short])} of {ncol} columns)")
+    bad = next(((i, j, v) for i, r in enumerate(rows) for j, v in enumerate(r[:ncol])
+                if not _is_number(v)), None)  # fmt: skip
+    if bad is not None:
+        i, j, v = bad
+        raise TraceReadError(
+            path, f"non-numeric value {v[:40]!r} in data row {i + 1}, column {j + 1}: every "
+            "value below the header must be a number (decimal point, or decimal comma with "
+            "';' between the columns)")
+    return np.array([[float(v) for v in r[:ncol]] for r in rows], dtype=float).reshape(-1, ncol)
 
 
 def read_text(path: Path, **options: Any) -> list[Trace]:
     """Read the traces of a CSV/TXT file in any recognised layout."""
-    rows = read_rows(path)
+    rows, note = read_rows(path)
+    traces = _text_traces(path, rows, **options)
+    if note:  # said once per file by the run (stickslip.traces.trace.read_notes)
+        for t in traces:
+            t.meta[READ_NOTE] = note
+    return traces
+
+
+def _text_traces(path: Path, rows: list[list[str]], **options: Any) -> list[Trace]:
     if all(_is_number(c) for c in rows[0]):
         if len(rows[0]) < 3:
             raise TraceReadError(
