@@ -193,11 +193,19 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
     a :data:`CLEAN_FRACTION` left clean), and those on a flat substrate one pristine line
     more, as training's pristine lines."""
     from stickslip.estimators.line.training import TYPICAL_FRACTION, training_effects
-    from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
+    from stickslip.jobs.train import BundledRecipe
+    from stickslip.simulators.randomised import (
+        RandomisedConfig,
+        cached_randomised_set,
+        lab_config,
+        with_dynamics,
+    )
 
     n, seed = REFERENCE_SIZES, REFERENCE_SEEDS
     configs = [RandomisedConfig(n=n["randomised"], seed=seed["randomised"]),
                lab_config(n["lab"], seed["lab"])]  # fmt: skip
+    if BundledRecipe().dynamics:  # the training prior's dynamics and acquisition
+        configs = [with_dynamics(c) for c in configs]
     parts = []
     for config in configs:
         data = cached_randomised_set(config, work, progress=False)
@@ -205,35 +213,38 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
         flat = (np.asarray(p["mod_amplitude"]) == 0) & (np.asarray(p["defect_count"]) == 0)
         parts.append((np.asarray(data.x_nm, float), np.asarray(data.force_nN, float),
                       np.asarray(p["lattice_nm"], float),
-                      np.asarray(p["velocity_nm_per_s"], float), flat))  # fmt: skip
+                      np.asarray(p["velocity_nm_per_s"], float), flat,
+                      np.asarray(p["temperature_K"], float)))  # fmt: skip
     n_p, seed_p = REFERENCE_SIZES["paper"], REFERENCE_SEEDS["paper"]
     paper = _cached(work / f"paper_{n_p}_{seed_p}.npz",
                     lambda: _pt_lines(n_p, seed_p, ParameterRange().eta, LATTICE_NM))  # fmt: skip
     parts.append((X_NM, paper["force_nN"], np.full(n_p, LATTICE_NM), np.full(n_p, 60.0),
-                  np.ones(n_p, bool)))  # fmt: skip
+                  np.ones(n_p, bool), np.full(n_p, 296.0)))  # fmt: skip
     rng = np.random.default_rng(REFERENCE_SEEDS["effects"])
     effects = training_effects(TYPICAL_FRACTION)
     traces, owner = [], []
     first = 0
-    for x, F, a, v, flat in parts:
+    for x, F, a, v, flat, T in parts:
         draws = []
         for _ in range(EFFECT_DRAWS):
             noisy = apply_instrument(F, effects, rng)[0]
             keep = rng.random(F.shape[0]) < CLEAN_FRACTION
             noisy[keep] = F[keep]
-            draws.append((np.arange(F.shape[0]), noisy, v))
-        draws.append((np.flatnonzero(flat), F[flat], v))
+            draws.append((np.arange(F.shape[0]), noisy, v, T))
+        draws.append((np.flatnonzero(flat), F[flat], v, T))
         # and the broad nuisance prior (effect families, "train" implementation): lines a
         # lab records carry them, and the calibration is fitted on them
         for _ in range(FAMILY_DRAWS):
             d = fx.draw(fx.NuisancePrior(), F.shape[0], rng, "train")
-            noisy, said = fx.apply(d, x, F, v, rng)
-            draws.append((np.arange(F.shape[0]), noisy, said.velocity_nm_per_s))
-        for rows, forces, vel in draws:
+            noisy, said = fx.apply(d, x, F, v, rng, temperature_K=T)
+            draws.append((np.arange(F.shape[0]), noisy, said.velocity_nm_per_s,
+                          said.temperature_K))  # fmt: skip
+        for rows, forces, vel, temp in draws:
             for i, f in zip(rows, forces, strict=True):
                 traces.append(Trace(x, f, f"reference:{first + i}", "reference",
                                     {"lattice_nm": float(a[i]),
-                                     "velocity_nm_per_s": float(vel[i])}))  # fmt: skip
+                                     "velocity_nm_per_s": float(vel[i]),
+                                     "temperature_K": float(temp[i])}))  # fmt: skip
                 owner.append(first + i)
         first += F.shape[0]
     return traces, np.array(owner)
@@ -253,8 +264,9 @@ def write_reference(work: Path, out: Path, level: float = 0.995) -> None:
     traces, owner = reference_traces(work)
     a = np.array([t.meta["lattice_nm"] for t in traces])
     v = np.array([t.meta["velocity_nm_per_s"] for t in traces])
+    T = np.array([t.meta["temperature_K"] for t in traces])
     _, feats = pooled_features(line.ensemble, [t.x_nm for t in traces],
-                               [t.force_nN for t in traces], a, v)  # fmt: skip
+                               [t.force_nN for t in traces], a, v, T)  # fmt: skip
     held = np.random.default_rng(REFERENCE_SEEDS["effects"]).random(owner.max() + 1) < HOLD_OUT
     test = held[owner]
     ref = EmbeddingReference.fit(feats[:, ~test], fingerprint(line.ensemble), level=level)

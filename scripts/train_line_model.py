@@ -96,6 +96,9 @@ def main() -> None:
                     help="put the effect families (the broad nuisance prior, 'train' "
                          "implementations) on this fraction of the non-pristine training "
                          "lines (0: none)")  # fmt: skip
+    ap.add_argument("--coarse", type=float, default=0.3, metavar="FRACTION",
+                    help="re-pixelate this fraction of the lines coarser (1-4x the "
+                         "simulated pixel), as larger detector pixels record them")  # fmt: skip
     ap.add_argument("--expert", default="clean",
                     help="window model read as expert input: clean, bundled, none, or a file")
     ap.add_argument("--recalibrate", type=Path, default=None,
@@ -118,7 +121,7 @@ def main() -> None:
                           spread_hidden=args.spread_hidden,
                           effects=training_effects(args.typical_fraction),
                           calibration_draws=args.calibration_draws,
-                          spread_power=args.spread_power,
+                          spread_power=args.spread_power, coarse_fraction=args.coarse,
                           **family_settings(args.families))  # fmt: skip
     if args.recalibrate is not None:
         recalibrate(ap, args, training.data, training.parts, cfg)

@@ -56,3 +56,28 @@ def test_write_metrics_and_plots(tmp_path):
                       reference={"U0_eV": 1.0, "K_N_m": np.nan}),
     ):  # fmt: skip
         assert path.stat().st_size > 1000 and path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_interval_score_is_least_for_the_true_quantiles():
+    from stickslip.diagnostics.metrics import interval_score
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(0.0, 1.0, 200000)
+    scores = {h: interval_score(y, -h, h, 0.05).mean() for h in (1.5, 1.96, 2.5)}
+    assert scores[1.96] < scores[1.5] and scores[1.96] < scores[2.5]
+    # a truth outside pays the width plus 2/alpha times the miss
+    assert interval_score(np.array([3.0]), np.array([-1.0]), np.array([1.0]), 0.05)[0] == 2.0 + 40.0 * 2.0
+
+
+def test_target_metrics_report_score_width_and_sharpness():
+    from stickslip.diagnostics.metrics import target_metrics
+
+    rng = np.random.default_rng(1)
+    t = np.exp(rng.uniform(0, 1, 20000))
+    p = t * np.exp(rng.normal(0.0, 0.05, t.size))
+    wide = target_metrics(t, p, {"95": (p * np.exp(-0.2), p * np.exp(0.2))})
+    sharp = target_metrics(t, p, {"95": (p * np.exp(-0.098), p * np.exp(0.098))})
+    assert wide["coverage95"] > 0.999 and abs(sharp["coverage95"] - 0.95) < 0.01
+    assert sharp["interval_score95"] < wide["interval_score95"]
+    # a calibrated Gaussian interval has a sharpness ratio near 1, one twice as wide near 2
+    assert 0.9 < sharp["sharpness95"] < 1.1 and 1.8 < wide["sharpness95"] < 2.3

@@ -95,3 +95,40 @@ def test_cached_set_is_simulated_once_and_can_stay_on_disk(tmp_path):
     assert isinstance(lazy.force_nN, Rows) and not isinstance(loaded.force_nN, Rows)
     np.testing.assert_array_equal(np.asarray(lazy.force_nN), loaded.force_nN)
     np.testing.assert_array_equal(lazy.params["K_N_m"], loaded.params["K_N_m"])
+
+
+def test_dynamics_prior_draws_in_its_ranges_and_leaves_the_other_draws_unchanged():
+    from stickslip.simulators.config import PhysicalSettings
+    from stickslip.simulators.randomised import DYNAMICS_PRIOR, VELOCITY_STEPS, with_dynamics
+
+    base = RandomisedConfig(n=3000, seed=5)
+    a, _ = draw_randomised(base)
+    b, _ = draw_randomised(with_dynamics(base))
+    for k in ("U0_eV", "K_N_m", "lattice_nm", "mod_amplitude", "defect_count"):
+        assert np.array_equal(a[k], b[k])
+    preset = PhysicalSettings()
+    # the preset's dynamics without the prior
+    assert np.all(a["damping_per_s"] == preset.damping_per_s)
+    assert np.all(a["mass_kg"] == preset.mass_kg)
+    assert np.all(a["temperature_K"] == base.temperature_K)
+    v_lo, v_hi = DYNAMICS_PRIOR["velocity_range"]
+    v = b["velocity_nm_per_s"]
+    assert np.unique(v).size == VELOCITY_STEPS
+    assert v.min() == v_lo and v.max() == v_hi
+    # log-uniform: as many lines below the geometric middle as above it
+    assert abs(np.mean(v < np.sqrt(v_lo * v_hi)) - 0.5) < 0.05
+    T_lo, T_hi = DYNAMICS_PRIOR["temperature_range_K"]
+    assert T_lo <= b["temperature_K"].min() and b["temperature_K"].max() <= T_hi
+    for k, name in (("damping_per_s", "damping_factor"), ("mass_kg", "mass_factor")):
+        lo, hi = DYNAMICS_PRIOR[name]
+        f = b[k] / getattr(preset, k)
+        assert lo * 0.999 <= f.min() < lo * 1.2 and hi / 1.2 < f.max() <= hi * 1.001
+        assert abs(np.mean(f < np.sqrt(lo * hi)) - 0.5) < 0.05
+
+
+def test_dynamics_config_round_trips_and_gets_its_own_cache_file(tmp_path):
+    from stickslip.simulators.randomised import with_dynamics
+
+    cfg = with_dynamics(RandomisedConfig(n=10, seed=1))
+    assert RandomisedConfig.from_json(cfg.to_json()) == cfg
+    assert cache_path(cfg, tmp_path) != cache_path(RandomisedConfig(n=10, seed=1), tmp_path)

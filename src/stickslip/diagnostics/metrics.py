@@ -90,6 +90,16 @@ def format_table(table: Mapping[str, Mapping[str, float]]) -> str:
     return "\n".join(lines)
 
 
+def interval_score(y: np.ndarray, lo: np.ndarray, hi: np.ndarray, alpha: float) -> np.ndarray:
+    """The interval score of central ``1 - alpha`` intervals ``[lo, hi]`` for truths ``y``
+    (Gneiting and Raftery 2007; Winkler 1972): the width, plus ``2 / alpha`` times how far
+    the truth falls outside. A proper scoring rule: lower is better, and it is least in
+    expectation for the true quantiles, so it rewards intervals that are as narrow as
+    the data allow and no narrower."""
+    y, lo, hi = (np.asarray(v, float) for v in (y, lo, hi))
+    return (hi - lo) + (2.0 / alpha) * (np.maximum(lo - y, 0.0) + np.maximum(y - hi, 0.0))
+
+
 def target_metrics(true: np.ndarray, pred: np.ndarray,
                    intervals: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None
                    ) -> dict[str, float]:  # fmt: skip
@@ -108,7 +118,12 @@ def target_metrics(true: np.ndarray, pred: np.ndarray,
     dict
         ``n`` (rows with a truth), ``answered`` (of those, rows with an estimate),
         ``rmse``, ``rel_rmse``, ``median_rel`` (median of |relative error|), ``bias``,
-        and ``coverage68``/``coverage95`` where intervals are given.
+        and ``coverage68``/``coverage95`` where intervals are given, with, per level,
+        ``interval_score{level}`` (:func:`interval_score`, mean over rows, on the
+        relative scale ``ln`` for a positive target, else in the target's unit) and
+        ``rel_halfwidth{level}`` (median of the half-width over |truth|); and
+        ``sharpness95``: the median relative 95 % half-width over the one a calibrated
+        Gaussian with these errors would have (``median_rel * 1.96 / 0.674``).
     """
     t = np.asarray(true, float)
     p = np.asarray(pred, float)
@@ -131,4 +146,15 @@ def target_metrics(true: np.ndarray, pred: np.ndarray,
         lo, hi = np.asarray(lo, float)[ok], np.asarray(hi, float)[ok]
         inside = (t[ok] >= lo) & (t[ok] <= hi)
         out[f"coverage{level}"] = float(np.mean(inside)) if inside.size else nan
+        alpha = 1.0 - float(level) / 100.0
+        positive = bool(np.all(t[ok] > 0) and np.all(lo > 0))
+        y, a, b = (np.log(t[ok]), np.log(lo), np.log(hi)) if positive else (t[ok], lo, hi)
+        score = interval_score(y, a, b, alpha)
+        out[f"interval_score{level}"] = float(np.mean(score)) if score.size else nan
+        with np.errstate(divide="ignore", invalid="ignore"):
+            half = 0.5 * (hi - lo) / np.abs(t[ok])
+        half = half[np.isfinite(half)]
+        out[f"rel_halfwidth{level}"] = float(np.median(half)) if half.size else nan
+    if "rel_halfwidth95" in out and out["median_rel"] > 0:
+        out["sharpness95"] = out["rel_halfwidth95"] / (out["median_rel"] * 1.959964 / 0.674490)
     return out

@@ -7,6 +7,13 @@ wider than the paper's, each trajectory then gets a lattice spacing ``a`` (unifo
 ``velocities_nm_per_s`` (a few discrete values: one simulator call per velocity), and
 an augmented substrate (modulation and defects) for all but ``clean_fraction`` of them.
 Detector effects are not simulated here: the training pipeline adds them on the fly.
+
+The contact's dynamics and the acquisition can be randomised too (``velocity_range``,
+``temperature_range_K``, ``damping_factor``, ``mass_factor``): a real contact's damping
+and effective mass are on no label (PHYSICS.md), so a model trained over a range of
+them integrates over them instead of assuming the preset's. Velocities are drawn
+log-uniform and rounded to :data:`VELOCITY_STEPS` log-spaced values over the range, so
+that one simulator call serves many trajectories.
 """
 
 from __future__ import annotations
@@ -41,6 +48,8 @@ from stickslip.traces.dataset import (
 from stickslip.units import eta_from
 
 A_REF_NM = 0.246
+#: log-spaced velocities a continuous velocity range is rounded to (one simulator call each)
+VELOCITY_STEPS = 16
 
 
 @dataclass(frozen=True)
@@ -73,6 +82,13 @@ class RandomisedConfig:
     length_nm: float = 11.0
     pixels: int = 512
     chunk: int = 500
+    #: log-uniform velocity range (nm/s); None: the discrete ``velocities_nm_per_s``
+    velocity_range: tuple[float, float] | None = None
+    #: uniform temperature range (K); None: ``temperature_K`` for every trajectory
+    temperature_range_K: tuple[float, float] | None = None
+    #: log-uniform factors on the preset's damping rate and tip mass (PhysicalSettings)
+    damping_factor: tuple[float, float] = (1.0, 1.0)
+    mass_factor: tuple[float, float] = (1.0, 1.0)
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), sort_keys=True)
@@ -82,6 +98,9 @@ class RandomisedConfig:
         """The config stored in a set's file (fields added later take the value that
         files written before them were made with: no lines on the reference lattice)."""
         d = {"reference_fraction": 0.0, **json.loads(text)}
+        for k in ("velocity_range", "temperature_range_K"):
+            if d.get(k) is not None:
+                d[k] = tuple(d[k])
 
         def tuples(sub: dict) -> dict:
             return {k: tuple(v) if isinstance(v, list) else v for k, v in sub.items()}
@@ -99,6 +118,20 @@ def lab_config(n: int, seed: int) -> RandomisedConfig:
     the training distribution and the test bench (which also fixes the materials'
     lattices and the scan velocity)."""
     return RandomisedConfig(n=n, seed=seed, substrate=LAB_SUBSTRATE, clean_fraction=0.0)
+
+
+#: the contact dynamics and acquisition the bundled line model is trained over: velocity
+#: log-uniform 10-200 nm/s, temperature 250-350 K, damping 0.1-10x and tip mass 0.3-3x
+#: the preset's (the scan length and pixel count stay at the reference: lines are mapped
+#: onto its pixel, benchmarks/lattice_mapping.py)
+DYNAMICS_PRIOR = {"velocity_range": (10.0, 200.0), "temperature_range_K": (250.0, 350.0),
+                  "damping_factor": (0.1, 10.0), "mass_factor": (0.3, 3.0)}  # fmt: skip
+
+
+def with_dynamics(config: RandomisedConfig, prior: dict | None = None) -> RandomisedConfig:
+    """``config`` with the contact dynamics and acquisition randomised (default
+    :data:`DYNAMICS_PRIOR`)."""
+    return dataclasses.replace(config, **(DYNAMICS_PRIOR if prior is None else prior))
 
 
 def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], SubstrateDraw]:
@@ -121,13 +154,39 @@ def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], Su
         U0[on_ref] = U0_ref[on_ref]
     sub.mod_amplitude[clean] = 0.0
     sub.defect_height[clean] = 0.0
+    # the dynamics and acquisition come from a stream of their own: the draws above are
+    # the same whether they are randomised or not
+    v, T, gamma, m = _draw_dynamics(config, v)
     table = {
         "index": np.arange(n), "U0_eV": U0, "K_N_m": K, "eta": eta_from(U0, K, a),
         "F_mean_nN": np.full(n, np.nan), "lattice_nm": a, "velocity_nm_per_s": v,
-        "temperature_K": np.full(n, config.temperature_K), "mod_amplitude": sub.mod_amplitude,
+        "temperature_K": T, "damping_per_s": gamma, "mass_kg": m,
+        "mod_amplitude": sub.mod_amplitude,
         "defect_count": np.count_nonzero(sub.defect_height, axis=1),
     }  # fmt: skip
     return table, sub
+
+
+def _draw_dynamics(config: RandomisedConfig, v: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Velocity, temperature, damping rate and mass per trajectory (see the module)."""
+    n = v.size
+    rng = np.random.default_rng([config.seed, 32])
+    preset = PhysicalSettings()
+
+    def log_uniform(lo: float, hi: float) -> np.ndarray:
+        return np.exp(rng.uniform(np.log(lo), np.log(hi), n))
+
+    if config.velocity_range is not None:
+        lo, hi = config.velocity_range
+        grid = np.geomspace(lo, hi, VELOCITY_STEPS)
+        u = rng.uniform(0.0, 1.0, n) * (VELOCITY_STEPS - 1)
+        v = grid[np.rint(u).astype(int)]
+    T = (np.full(n, config.temperature_K) if config.temperature_range_K is None
+         else rng.uniform(*config.temperature_range_K, n))  # fmt: skip
+    gamma = preset.damping_per_s * log_uniform(*config.damping_factor)
+    m = preset.mass_kg * log_uniform(*config.mass_factor)
+    return v, T, gamma, m
 
 
 def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
@@ -136,7 +195,9 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     out = Path(out)
     n = config.n
     table, sub = draw_randomised(config)
-    U0, K, a, v = (table[k] for k in ("U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s"))
+    U0, K, a, v, T, gamma, m = (table[k] for k in (
+        "U0_eV", "K_N_m", "lattice_nm", "velocity_nm_per_s", "temperature_K", "damping_per_s",
+        "mass_kg"))  # fmt: skip
     physics = PhysicalSettings(temperature_K=config.temperature_K, length_nm=config.length_nm,
                                pixels=config.pixels)  # fmt: skip
     x_nm = np.arange(physics.pixels) * physics.pixel_nm
@@ -145,11 +206,16 @@ def make_randomised_set(config: RandomisedConfig, out: str | os.PathLike,
     out.parent.mkdir(parents=True, exist_ok=True)
     part = out.with_name(out.name + ".partial")
     create_dataset_file(part, n, x_nm, table, attrs)
+    # chunks in order of velocity: the kernel integrates lanes in blocks that share their
+    # step layout, so a chunk of one or two velocities fills its blocks (the same traces:
+    # each trajectory's random stream depends only on its index)
+    order = np.argsort(v, kind="stable")
     for s in tqdm(range(0, n, config.chunk), desc=f"simulate {out.name}", disable=not progress):
-        rows = np.arange(s, min(s + config.chunk, n))
+        rows = np.sort(order[s : s + config.chunk])
         res = simulate(
             U0[rows], K[rows], physics, seed=config.seed, indices=rows, lattice_nm=a[rows],
-            velocity_nm_per_s=v[rows],
+            velocity_nm_per_s=v[rows], temperature_K=T[rows], damping_per_s=gamma[rows],
+            mass_kg=m[rows],
             modulation=(sub.mod_amplitude[rows], sub.mod_wavelength_nm[rows],
                         sub.mod_phase_rad[rows]),
             defects=(sub.defect_x_nm[rows], sub.defect_height[rows], sub.defect_width_nm[rows]),

@@ -453,3 +453,59 @@ def test_calibration_set_draws_the_effects_afresh_on_the_validation_lines():
     # each draw corrupts the same clean line differently
     assert not np.allclose(cs.lines[0], cs.lines[10]) and not np.allclose(cs.lines[10],
                                                                            cs.lines[20])
+
+
+def test_evidence_fit_finds_the_width_that_the_evidence_adds():
+    from stickslip.estimators.line.training import evidence_fit
+
+    rng = np.random.default_rng(3)
+    n = 20000
+    e = rng.uniform(-1.0, 1.0, (n, 2))
+    # half-width grows as exp(0.6 e0) with the first evidence; the second says nothing
+    err = np.abs(rng.normal(0.0, 1.0, n)) * np.exp(0.6 * e[:, 0])
+    b = evidence_fit(np.log(err), e, np.ones(n))
+    assert abs(b[1] - 0.6) <= 0.1 and b[2] <= 0.1
+    half = np.exp(b[0] + e @ b[1:])
+    inside = err <= half
+    assert abs(inside.mean() - 0.95) < 0.01
+    # coverage holds where the evidence is low and where it is high, not just on average
+    assert abs(inside[e[:, 0] < -0.5].mean() - 0.95) < 0.02
+    assert abs(inside[e[:, 0] > 0.5].mean() - 0.95) < 0.02
+
+
+def test_temperature_conditioning_reads_the_temperature_and_round_trips(tmp_path):
+    from stickslip.estimators.line.ensemble import conditioning, n_conditions
+
+    spec = LineSpec(condition_temperature=True, temperature_range_K=(250.0, 350.0))
+    C = conditioning([0.246, 0.246], [60.0, 60.0], spec, [296.0, 355.2])
+    assert C.shape == (2, 3) and np.allclose(C[:, 2].numpy(), [0.0, 0.2], atol=1e-6)
+    assert conditioning([0.246], [60.0], LineSpec()).shape == (1, 2)
+    assert spec.trained_at(300.0) and not spec.trained_at(360.0)
+    assert LineSpec().trained_at(296.5) and not LineSpec().trained_at(300.0)
+    torch.manual_seed(0)
+    net = LineCNN(channels=(4, 4), n_cond=n_conditions(spec)).eval()
+    ens = LineEnsemble(members=[net], spec=spec, y_mean=np.zeros(4), y_std=np.ones(4))
+    path = save_line_model(ens, tmp_path / "m.pt", (4, 4), {}, {}, {})
+    back = load_line_model(path)
+    assert back.spec == spec
+    X = line_inputs([np.sin(np.arange(200) / 3.0)], spec)
+    cold, hot = (back.predict(X, conditioning([0.246], [60.0], spec, [T]))[0] for T in (250, 350))
+    assert not np.allclose(cold, hot)  # the temperature reaches the members
+
+
+def test_coarse_repixelation_is_what_a_coarser_detector_records():
+    from stickslip.estimators.line.training import coarse_factors, pixel_and_map
+
+    cold = PhysicalSettings(temperature_K=0.0, warmup_nm=2.0)
+    fine = simulate([1.5], [12.0], cold)
+    coarse = simulate([1.5], [12.0], cold.replace(pixels=256))
+    spec = LineSpec()
+    # each pixel is the mean force over its travel: two fine pixels make one coarse one
+    # (up to the time step, which each run adjusts to whole steps per pixel)
+    assert np.allclose(pixel_and_map(fine.x_nm, fine.force_nN[0], 0.246, spec, 2.0),
+                       map_line(coarse.x_nm, coarse.force_nN[0], 0.246, spec), atol=2e-4)
+    rng = np.random.default_rng(0)
+    a = np.full(4000, 0.246)
+    f = coarse_factors(a, 0.3, rng, spec)
+    assert abs(np.mean(f > 1.0) - 0.3) < 0.03 and f.max() <= 0.95 * 4.0 + 1e-9
+    assert np.all(coarse_factors(a, 0.0, rng, spec) == 1.0)

@@ -44,7 +44,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from stickslip.conditions import GRAPHITE, Reference
+from stickslip.conditions import GRAPHITE, TEMPERATURE_TOLERANCE_K, Reference
 from stickslip.estimators.calibration import (
     SHAPE_LEVELS,
     Z68,
@@ -52,6 +52,7 @@ from stickslip.estimators.calibration import (
     gaussian_z,
     lognormal_std,
 )
+from stickslip.estimators.evidence import line_evidence
 from stickslip.estimators.mapping import to_reference
 from stickslip.estimators.offsets import (
     CompressionPrior,
@@ -80,6 +81,21 @@ class LineSpec:
     slope_scale_nN: float = 1.0
     crop: int = 352
     min_pixels: int = 64
+    #: the members read the temperature as a third conditioning scalar (models trained
+    #: over a range of temperatures); else they assume ``temperature_K``
+    condition_temperature: bool = False
+    #: the temperatures the model was trained over (K; None: ``temperature_K`` only)
+    temperature_range_K: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.temperature_range_K is not None:  # a list, when read back from a file
+            object.__setattr__(self, "temperature_range_K",
+                               tuple(float(t) for t in self.temperature_range_K))  # fmt: skip
+
+    def trained_at(self, temperature_K: float) -> bool:
+        """Whether the model was trained at (or over a range that holds) this temperature."""
+        lo, hi = self.temperature_range_K or (self.temperature_K, self.temperature_K)
+        return lo - TEMPERATURE_TOLERANCE_K <= temperature_K <= hi + TEMPERATURE_TOLERANCE_K
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -137,11 +153,22 @@ def input_force_nN(X: torch.Tensor, spec: LineSpec) -> np.ndarray:
     return X[:, 0].numpy().astype(np.float64) * spec.force_scale_nN
 
 
-def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec) -> torch.Tensor:
-    """Conditioning scalars (B, 2): lattice ratio - 1 and ln of the velocity ratio."""
-    s = np.asarray(lattice_nm, float) / spec.lattice_nm - 1.0
-    lv = np.log(np.asarray(velocity_nm_per_s, float) / spec.velocity_nm_per_s)
-    return torch.from_numpy(np.column_stack(np.broadcast_arrays(s, lv)).astype(np.float32))
+def n_conditions(spec: LineSpec) -> int:
+    """How many conditioning scalars a model of this spec reads."""
+    return 3 if spec.condition_temperature else 2
+
+
+def conditioning(lattice_nm, velocity_nm_per_s, spec: LineSpec,
+                 temperature_K=None) -> torch.Tensor:  # fmt: skip
+    """Conditioning scalars (B, 2): lattice ratio - 1 and ln of the velocity ratio; with
+    ``spec.condition_temperature``, (B, 3) with the temperature ratio - 1 (``None``: the
+    reference temperature)."""
+    cols = [np.asarray(lattice_nm, float) / spec.lattice_nm - 1.0,
+            np.log(np.asarray(velocity_nm_per_s, float) / spec.velocity_nm_per_s)]  # fmt: skip
+    if spec.condition_temperature:
+        T = spec.temperature_K if temperature_K is None else temperature_K
+        cols.append(np.asarray(T, float) / spec.temperature_K - 1.0)
+    return torch.from_numpy(np.column_stack(np.broadcast_arrays(*cols)).astype(np.float32))
 
 
 class PackedBody:
@@ -370,6 +397,23 @@ class LineEnsemble:
     #: single-line interval, with the offset and compression terms, takes at them
     #: (:func:`~stickslip.estimators.offsets.fit_friction_factor`); None: 1
     friction_factor: np.ndarray | None = None
+    #: (n_targets, 1 + len(EVIDENCE)): the calibrated std's factor ``exp(b0 + b . e)``
+    #: on what the line shows (:mod:`stickslip.estimators.evidence`); None: 1
+    evidence: np.ndarray | None = None
+    #: (2, len(EVIDENCE)): the calibration lines' range of ``e``, to which a line's is
+    #: clipped (no extrapolation beyond what the fit saw)
+    evidence_range: np.ndarray | None = None
+
+    def evidence_factor(self, X: torch.Tensor) -> np.ndarray:
+        """The factor on each input line's calibrated std, (B, n_targets) (1 without)."""
+        if self.evidence is None:
+            return np.ones((X.shape[0], len(TARGETS)))
+        e = line_evidence(list(input_force_nN(X, self.spec)),
+                          self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
+        if self.evidence_range is not None:
+            e = np.clip(e, self.evidence_range[0], self.evidence_range[1])
+        b = np.asarray(self.evidence, float)
+        return np.exp(b[:, 0][None, :] + e @ b[:, 1:].T)
 
     def z_at(self, level: float) -> np.ndarray:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
@@ -440,7 +484,7 @@ class LineEnsemble:
         if scale.ndim == 2:
             cls = self.line_classes(X, C)
             scale, exponent = scale[cls], exponent[cls]
-        return means.mean(axis=0), scale * sd**exponent
+        return means.mean(axis=0), scale * sd**exponent * self.evidence_factor(X)
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
@@ -505,8 +549,10 @@ def predict_lines(
     batch: int = 2048,
     features: bool = False,
     trace_m3_nN: np.ndarray | None = None,
+    temperature_K: np.ndarray | None = None,
 ) -> LinePrediction:
-    """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity.
+    """Predict from mapped lines (see :func:`map_line`) with their lattice and velocity
+    (and temperature, read by models that condition on it; None: the model's).
 
     ``trace_mean_nN`` is each trace's own mean force (on its original samples), to which
     the predicted friction correction is added. Lines of equal length are batched
@@ -520,7 +566,8 @@ def predict_lines(
     v = np.broadcast_to(np.asarray(velocity_nm_per_s, float), (n,))
     feats = np.empty((len(ens.members), n, ens.members[0].n_features), np.float32) \
         if features else None
-    mu, sd = predict_std_lines(ens, lines, conditioning(a, v, ens.spec), batch, feats)
+    cond = conditioning(a, v, ens.spec, temperature_K)
+    mu, sd = predict_std_lines(ens, lines, cond, batch, feats)
     mu, sd = mu * ens.y_std + ens.y_mean, sd * ens.y_std
     s = a / ens.spec.lattice_nm
     shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
@@ -555,6 +602,7 @@ def predict_raw_lines(
     lattice_nm: np.ndarray,
     velocity_nm_per_s: np.ndarray,
     features: bool = False,
+    temperature_K: np.ndarray | None = None,
 ) -> LinePrediction:
     """Map traces of any pixel size and lattice (see :func:`map_line`), then predict
     (:func:`predict_lines`; ``features``: also what the members' heads read).
@@ -581,4 +629,4 @@ def predict_raw_lines(
     if short:
         raise ValueError(f"traces {short} are shorter than {ens.spec.min_pixels} mapped pixels")
     return predict_lines(ens, lines, a, velocity_nm_per_s, means, features=features,
-                         trace_m3_nN=m3)  # fmt: skip
+                         trace_m3_nN=m3, temperature_K=temperature_K)  # fmt: skip

@@ -24,7 +24,6 @@ from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
 from stickslip.traces.trace import Trace
 
-TEMPERATURE_TOLERANCE_K = 1.0
 #: The bundled model's embedding reference (``benchmarks/domain.py --write-reference``).
 DOMAIN_REFERENCE = "line_domain.npz"
 
@@ -50,13 +49,13 @@ def bundled_reference() -> EmbeddingReference | None:
 
 def pooled_features(ens: LineEnsemble, x_nm: Sequence[np.ndarray],
                     force_nN: Sequence[np.ndarray], lattice_nm: np.ndarray,
-                    velocity_nm_per_s: np.ndarray
+                    velocity_nm_per_s: np.ndarray, temperature_K: np.ndarray | None = None
                     ) -> tuple[LinePrediction, np.ndarray]:  # fmt: skip
     """:func:`predict_raw_lines`, and what each member's head read for each line (the
     pooled CNN features, conditioning and expert inputs), (members, N, D), taken from
     the same forward pass."""
     pred = predict_raw_lines(ens, list(x_nm), list(force_nN), lattice_nm, velocity_nm_per_s,
-                             features=True)  # fmt: skip
+                             features=True, temperature_K=temperature_K)  # fmt: skip
     return pred, pred.features
 
 
@@ -99,18 +98,21 @@ class LineEstimator(TraceEstimator):
         ok = [i for i, r in enumerate(out) if r == ""]
         notes = []
         T = sorted({c.temperature_K for c in conditions})
-        if any(abs(x - spec.temperature_K) > TEMPERATURE_TOLERANCE_K for x in T):
+        if not all(spec.trained_at(x) for x in T):
             listed = ", ".join(f"{x:g}" for x in T)
-            notes.append(f"model trained at T = {spec.temperature_K:g} K, traces at {listed} K: "
+            lo, hi = spec.temperature_range_K or (spec.temperature_K, spec.temperature_K)
+            trained = f"{lo:g} K" if lo == hi else f"{lo:.0f}-{hi:.0f} K"
+            notes.append(f"model trained at T = {trained}, traces at {listed} K: "
                          "estimates are extrapolated")  # fmt: skip
         if not ok:
             return out, notes
         args = ([traces[i].x_nm for i in ok], [traces[i].force_nN for i in ok],
                 np.array([conditions[i].lattice_nm for i in ok]),
-                np.array([conditions[i].velocity_nm_per_s for i in ok]))  # fmt: skip
+                np.array([conditions[i].velocity_nm_per_s for i in ok]),
+                np.array([conditions[i].temperature_K for i in ok]))  # fmt: skip
         ref = self.embedding_reference if self.domain_verdict else None
         if ref is None:
-            pred, dist = predict_raw_lines(self.ensemble, *args), None
+            pred, dist = predict_raw_lines(self.ensemble, *args[:4], temperature_K=args[4]), None
             if self.domain_verdict:
                 notes.append("no embedding reference for this model: the domain verdict "
                              "reads the traces and the estimates only")  # fmt: skip

@@ -29,13 +29,15 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from stickslip.estimators.line.ensemble import LineEnsemble, conditioning, map_line
+from stickslip.estimators.line.ensemble import LineEnsemble, conditioning
 from stickslip.estimators.line.training import (
     TYPICAL_FRACTION,
     LineTrainConfig,
     ValidationSet,
     calibrate_and_report,
+    coarse_factors,
     line_targets,
+    pixel_and_map,
     training_effects,
 )
 from stickslip.estimators.offsets import CompressionPrior, OffsetPrior, compression_moment
@@ -92,9 +94,13 @@ class FamilyCalibration:
     compression: CompressionPrior | None = dataclasses.field(
         default_factory=lambda: CompressionPrior.from_family(fx.Saturation())
     )
+    #: calibration lines re-pixelated coarser, as in training
+    #: (:func:`~stickslip.estimators.line.training.coarse_factors`)
+    coarse_fraction: float = 0.3
 
     def to_dict(self) -> dict:
         return {"prior": self.prior.to_dict(), "seed": self.seed, "draws": self.draws,
+                "coarse_fraction": self.coarse_fraction,
                 "implementation": self.implementation, "training_draws": self.training_draws,
                 "families": list(self.prior.enabled()),
                 "offset": None if self.offset is None else self.offset.to_dict(),
@@ -196,16 +202,22 @@ def draw_training_lines(clean: Dataset, seed: int, draws: int = 1) -> FamilyLine
     return FamilyLines(data, np.zeros((rows.size, len(fx.FAMILIES)), bool), rows)
 
 
-def calibration_lines(ens: LineEnsemble, lines: FamilyLines, offset: bool = False
+def calibration_lines(ens: LineEnsemble, lines: FamilyLines, offset: bool = False,
+                      coarse_fraction: float = 0.0, seed: int = 0
                       ) -> tuple[ValidationSet, np.ndarray]:  # fmt: skip
-    """The lines as the calibration reads them (mapped, conditioned on the stated
-    velocity) and their targets (:func:`~stickslip.estimators.line.training.line_targets`);
-    with ``offset``, the <F> target is the friction plus the line's crosstalk mean."""
+    """The lines as the calibration reads them (a ``coarse_fraction`` re-pixelated
+    coarser, draws seeded by ``seed``; mapped, conditioned on the stated velocity and
+    temperature) and their targets
+    (:func:`~stickslip.estimators.line.training.line_targets`); with ``offset``, the <F>
+    target is the friction plus the line's crosstalk mean."""
     d, spec = lines.data, ens.spec
     p = d.params
     a = p["lattice_nm"]
-    mapped = [map_line(d.x_nm, f, ai, spec) for f, ai in zip(d.force_nN, a, strict=True)]
-    cs = ValidationSet(lines=mapped, C=conditioning(a, p["velocity_nm_per_s"], spec),
+    factors = coarse_factors(a, coarse_fraction, np.random.default_rng([seed, 17]), spec)
+    mapped = [pixel_and_map(d.x_nm, f, ai, spec, c)
+              for f, ai, c in zip(d.force_nN, a, factors, strict=True)]  # fmt: skip
+    cs = ValidationSet(lines=mapped, C=conditioning(a, p["velocity_nm_per_s"], spec,
+                                                 p.get("temperature_K")),
                        rows=lines.rows, strata=np.zeros(d.n, int),
                        observed_mean=d.force_nN.mean(axis=1),
                        m3_nN=compression_moment(np.asarray(d.force_nN, float)))  # fmt: skip
@@ -228,12 +240,15 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                               settings.implementation)  # fmt: skip
     if settings.offset is not None:
         lines = restate_offsets(lines, settings.offset, settings.seed)
-    cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None)
+    cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None,
+                              coarse_fraction=settings.coarse_fraction, seed=settings.seed)
     # the calibration lines that carry each family (training draws, if any, carry none)
     groups = {f: lines.applied[:, j] for j, f in enumerate(fx.FAMILIES)}
     if settings.training_draws:
         mild, Y_mild = calibration_lines(ens, draw_training_lines(clean, settings.seed,
-                                                                  settings.training_draws))
+                                                                  settings.training_draws),
+                                         coarse_fraction=settings.coarse_fraction,
+                                         seed=settings.seed + 1)  # fmt: skip
         cs = ValidationSet(lines=cs.lines + mild.lines, C=torch.cat([cs.C, mild.C]),
                            rows=np.concatenate([cs.rows, mild.rows]),
                            strata=np.concatenate([cs.strata, np.ones(len(mild.lines), int)]),

@@ -21,6 +21,10 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
                         none)
     friction_factor     (2, k) levels and factors on the model's own <F> half-width in
                         that interval (absent: 1)
+    evidence            (n_targets, 1 + n_evidence) coefficients of the std's factor
+                        exp(b0 + b . e) on what the line shows (absent: 1)
+    evidence_range      (2, n_evidence) the calibration lines' range of the evidence,
+                        to which a line's is clipped
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data
     metrics             validation metrics recorded at training time
@@ -46,6 +50,7 @@ from stickslip.estimators.line.ensemble import (
     LineEnsemble,
     LineSpec,
     SpreadClasses,
+    n_conditions,
 )
 from stickslip.estimators.offsets import CompressionPrior, OffsetPrior
 from stickslip.estimators.window.modelfile import (
@@ -80,7 +85,7 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
     }
     payload["spread_hidden"] = ens.members[0].spread_hidden
     # absent: a plain scale, Gaussian intervals, no factor on the <F> model part
-    for key in ("exponent", "shape", "friction_factor"):
+    for key in ("exponent", "shape", "friction_factor", "evidence", "evidence_range"):
         if getattr(ens, key) is not None:
             payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
     if ens.classes is not None:
@@ -117,7 +122,7 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
         members = []
         for sd in payload["members"]:
             net = LineCNN(channels=tuple(payload["channels"]), n_targets=len(TARGETS),
-                          n_expert=int(payload.get("n_expert", 0)),
+                          n_cond=n_conditions(spec), n_expert=int(payload.get("n_expert", 0)),
                           spread_hidden=int(payload.get("spread_hidden", 0)))  # fmt: skip
             net.load_state_dict(sd)
             net.eval()
@@ -134,6 +139,9 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             shape=payload["shape"].numpy() if "shape" in payload else None,
             friction_factor=(payload["friction_factor"].numpy()
                              if "friction_factor" in payload else None),  # fmt: skip
+            evidence=payload["evidence"].numpy() if "evidence" in payload else None,
+            evidence_range=(payload["evidence_range"].numpy()
+                            if "evidence_range" in payload else None),  # fmt: skip
             offset=(OffsetPrior.from_dict(payload["offset_prior"])
                     if "offset_prior" in payload else None),  # fmt: skip
             compression=(CompressionPrior.from_dict(payload["compression_prior"])

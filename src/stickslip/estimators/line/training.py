@@ -69,6 +69,7 @@ import torch
 from tqdm.auto import tqdm
 
 from stickslip.estimators.calibration import Z95
+from stickslip.estimators.evidence import line_evidence
 from stickslip.estimators.line.ensemble import (
     N_EXPERT,
     SHAPE_LEVELS,
@@ -81,9 +82,11 @@ from stickslip.estimators.line.ensemble import (
     gaussian_nll,
     line_inputs,
     map_line,
+    n_conditions,
     predict_std_lines,
 )
 from stickslip.estimators.line.streaming import LineBatches, StreamSettings, batch_loader
+from stickslip.estimators.mapping import MAX_PIXEL_RATIO, resample_mean
 from stickslip.estimators.offsets import FRICTION_LEVELS, fit_friction_factor
 from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
@@ -167,6 +170,10 @@ class LineTrainConfig:
     # (None: none, the bundled recipe; see the module notes)
     families: fx.NuisancePrior | None = None
     family_fraction: float = 0.5
+    # lines re-pixelated coarser, as a detector with larger pixels records them (each
+    # pixel the mean force over its travel: exact from the fine simulation), by a
+    # log-uniform factor up to COARSE_MAX (and the mapping's limit), then mapped back
+    coarse_fraction: float = 0.0
 
     def to_dict(self) -> dict:
         """Plain dict of the settings (saved in the model file). Without ``families``
@@ -208,35 +215,76 @@ def line_targets(U0_eV, K_N_m, F_mean_nN, lattice_nm, spec: LineSpec) -> np.ndar
     )
 
 
+#: the coarsest re-pixelation of a training line (x the simulated pixel)
+COARSE_MAX = 4.0
+
+
+def coarse_factors(lattice_nm: np.ndarray, fraction: float, rng: np.random.Generator,
+                   spec: LineSpec) -> np.ndarray:  # fmt: skip
+    """Per line, the factor by which it is re-pixelated (1: not): a ``fraction`` of them
+    log-uniform between 1 and :data:`COARSE_MAX`, and never so coarse that the mapped
+    pixel passes 95 % of the mapping's limit (:data:`~stickslip.estimators.mapping.
+    MAX_PIXEL_RATIO`)."""
+    a = np.asarray(lattice_nm, float)
+    factors = np.ones(a.size)
+    if fraction <= 0:
+        return factors
+    on = rng.random(a.size) < fraction
+    hi = np.minimum(COARSE_MAX, 0.95 * MAX_PIXEL_RATIO * a / spec.lattice_nm)
+    u = rng.random(a.size)
+    factors[on] = np.exp(u[on] * np.log(np.maximum(hi[on], 1.0)))
+    return factors
+
+
+def pixel_and_map(x_nm: np.ndarray, force_nN: np.ndarray, lattice_nm: float, spec: LineSpec,
+                  factor: float = 1.0) -> np.ndarray:  # fmt: skip
+    """:func:`map_line` of the line as recorded with pixels ``factor`` times larger
+    (:func:`~stickslip.estimators.mapping.resample_mean`: each new pixel the mean force
+    over its travel)."""
+    if factor <= 1.0:
+        return map_line(x_nm, force_nN, lattice_nm, spec)
+    x = np.asarray(x_nm, float)
+    pixel = (x[1] - x[0]) * factor
+    f = resample_mean(x, force_nN, pixel)
+    return map_line(x[0] + np.arange(f.size) * pixel, f, lattice_nm, spec)
+
+
 def corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng, clean_fraction=0.0,
-                    keep_clean: np.ndarray | None = None):  # fmt: skip
+                    keep_clean: np.ndarray | None = None,
+                    coarse_fraction: float = 0.0):  # fmt: skip
     """Corrupt a batch (a ``clean_fraction`` of traces, and those marked in
-    ``keep_clean``, left clean) and map it: the mapped lines and each corrupted trace's
+    ``keep_clean``, left clean), re-pixelate a ``coarse_fraction`` of it
+    (:func:`coarse_factors`) and map it: the mapped lines and each corrupted trace's
     mean (the friction target is the clean mean minus it: see :data:`TARGETS`)."""
     F, _ = apply_instrument(force_nN, effects, rng)
     clean = rng.random(F.shape[0]) < clean_fraction
     if keep_clean is not None:
         clean |= keep_clean
     F[clean] = force_nN[clean]
-    lines = [map_line(x_nm, f, a, spec) for f, a in zip(F, lattice_nm, strict=True)]
+    factors = coarse_factors(lattice_nm, coarse_fraction, rng, spec)
+    lines = [pixel_and_map(x_nm, f, a, spec, c)
+             for f, a, c in zip(F, lattice_nm, factors, strict=True)]  # fmt: skip
     return lines, F.mean(axis=1)
 
 
 def prepare_batch(force_nN, lattice_nm, velocity_nm_per_s, x_nm, spec, effects, rng,
                   crop: int | None, clean_fraction: float = 0.0,
-                  keep_clean: np.ndarray | None = None):  # fmt: skip
+                  keep_clean: np.ndarray | None = None, temperature_K=None,
+                  coarse_fraction: float = 0.0):  # fmt: skip
     """:func:`corrupt_and_map`, then stacked: input and conditioning tensors (lines
     cropped to ``crop``, at random, or centred on the shortest when None) and the
     corrupted traces' means."""
     lines, observed = corrupt_and_map(force_nN, lattice_nm, x_nm, spec, effects, rng,
-                                      clean_fraction, keep_clean)  # fmt: skip
+                                      clean_fraction, keep_clean,
+                                      coarse_fraction)  # fmt: skip
     X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
-    return X, conditioning(lattice_nm, velocity_nm_per_s, spec), observed
+    return X, conditioning(lattice_nm, velocity_nm_per_s, spec, temperature_K), observed
 
 
 def prepare_family_batch(force_nN, lattice_nm, velocity_nm_per_s, F_mean_nN, x_nm, spec,
                          config: LineTrainConfig, rng, crop: int | None,
-                         keep_clean: np.ndarray | None = None):  # fmt: skip
+                         keep_clean: np.ndarray | None = None,
+                         temperature_K=None):  # fmt: skip
     """:func:`prepare_batch` with effect families (``config.families``) on a
     ``config.family_fraction`` of the lines not marked in ``keep_clean``.
 
@@ -256,19 +304,29 @@ def prepare_family_batch(force_nN, lattice_nm, velocity_nm_per_s, F_mean_nN, x_n
     if keep_clean is not None:
         on &= ~keep_clean
     lines, reference = corrupt_and_map(force_nN, lattice_nm, x_nm, spec, config.effects, rng,
-                                       config.clean_fraction, keep_clean)  # fmt: skip
+                                       config.clean_fraction, keep_clean,
+                                       config.coarse_fraction)  # fmt: skip
     v = np.array(velocity_nm_per_s, float)
+    T = np.array(np.broadcast_to(spec.temperature_K if temperature_K is None else temperature_K,
+                                 (n,)), float)  # fmt: skip
     sel = np.flatnonzero(on)
     if sel.size:
         d = fx.draw(config.families, sel.size, rng, "train")
-        F, said = fx.apply(d, x_nm, force_nN[sel], v[sel], rng)
+        F, said = fx.apply(d, x_nm, force_nN[sel], v[sel], rng, temperature_K=T[sel])
         contact = fx.contact_force(d, force_nN[sel]).mean(axis=1)
+        factors = coarse_factors(np.asarray(lattice_nm)[sel], config.coarse_fraction, rng, spec)
         for j, i in enumerate(sel):
-            lines[i] = map_line(x_nm, F[j], lattice_nm[i], spec)
+            lines[i] = pixel_and_map(x_nm, F[j], lattice_nm[i], spec, factors[j])
         v[sel] = said.velocity_nm_per_s
+        T[sel] = said.temperature_K
         reference[sel] = F.mean(axis=1) + np.asarray(F_mean_nN, float)[sel] - contact
     X = line_inputs(lines, spec, length=crop, rng=rng if crop else None)
-    return X, conditioning(lattice_nm, v, spec), reference
+    return X, conditioning(lattice_nm, v, spec, T), reference
+
+
+def _temperatures(params: dict[str, np.ndarray], rows: np.ndarray) -> np.ndarray | None:
+    """The rows' temperatures (None where the set does not store them: the reference's)."""
+    return np.asarray(params["temperature_K"])[rows] if "temperature_K" in params else None
 
 
 def flat_substrate(params: dict[str, np.ndarray]) -> np.ndarray:
@@ -369,13 +427,15 @@ def validation_set(force_nN, x_nm, params, val: np.ndarray, config: LineTrainCon
     a = params["lattice_nm"]
     f_val, f_p = (np.asarray(force_nN[r], float) for r in (val, val_p))  # rows read here
     corrupted, mean_c = corrupt_and_map(f_val, a[val], x_nm, spec, config.effects, val_rng,
-                                        config.clean_fraction)  # fmt: skip
+                                        config.clean_fraction,
+                                        coarse_fraction=config.coarse_fraction)  # fmt: skip
     pristine, mean_p = corrupt_and_map(f_p, a[val_p], x_nm, spec, config.effects, val_rng,
                                        keep_clean=np.ones(val_p.size, bool))  # fmt: skip
     rows = np.concatenate([val, val_p])
     return ValidationSet(
         lines=corrupted + pristine,
-        C=conditioning(a[rows], params["velocity_nm_per_s"][rows], spec),
+        C=conditioning(a[rows], params["velocity_nm_per_s"][rows], spec,
+                       _temperatures(params, rows)),
         rows=rows,
         strata=np.repeat([0, 1], [val.size, val_p.size]),
         observed_mean=np.concatenate([mean_c, mean_p]),
@@ -414,6 +474,52 @@ def held_out(force_nN, x_nm, params, config: LineTrainConfig, spec: LineSpec,
     return train, vs, Y
 
 
+#: slopes tried for each evidence coefficient (:func:`evidence_fit`)
+EVIDENCE_SLOPES = np.linspace(0.0, 1.0, 21)
+
+
+def evidence_fit(r: np.ndarray, e: np.ndarray, weights: np.ndarray, level: float = 0.95,
+                 slopes: np.ndarray = EVIDENCE_SLOPES) -> np.ndarray:  # fmt: skip
+    """Coefficients ``(b0, b)`` of the ``level`` quantile of ``r`` given the evidence
+    ``e``: ``b0 + b . e``, with each ``b >= 0`` on a grid (coordinate-wise, twice round)
+    and ``b0`` then exact, the one of least pinball loss.
+
+    ``r`` is ``ln |error| - ln(calibrated std)`` of the calibration lines, so the fit is
+    a linear quantile regression of the interval's half-width on what the line shows:
+    its pinball loss is, up to a constant factor, the mean interval score of the
+    central ``2 level - 1`` interval (Gneiting and Raftery 2007).
+
+    Parameters
+    ----------
+    r : ndarray (N,)
+    e : ndarray (N, k)
+    weights : ndarray (N,)
+
+    Returns
+    -------
+    ndarray (1 + k,)
+    """
+    w = weights / weights.sum()
+
+    def loss(b: np.ndarray) -> tuple[float, float]:
+        u = r - e @ b
+        b0 = float(_weighted_quantile(u, w, level))
+        u = u - b0
+        return float(np.sum(w * np.maximum(level * u, (level - 1.0) * u))), b0
+
+    b = np.zeros(e.shape[1])
+    best, b0 = loss(b)
+    for _ in range(2):
+        for j in range(b.size):
+            for g in slopes:
+                trial = b.copy()
+                trial[j] = g
+                value, c = loss(trial)
+                if value < best - 1e-12:
+                    best, b0, b = value, c, trial
+    return np.concatenate([[b0], b])
+
+
 def class_fit(err_abs: np.ndarray, sd: np.ndarray, classes: np.ndarray, n_classes: int,
               strata: np.ndarray, power: bool = True,
               min_lines: int = 30) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
@@ -440,17 +546,20 @@ def class_fit(err_abs: np.ndarray, sd: np.ndarray, classes: np.ndarray, n_classe
 
 
 def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
-              classes: SpreadClasses | None = None, power: bool = True):  # fmt: skip
+              classes: SpreadClasses | None = None, power: bool = True,
+              evidence: bool = True):  # fmt: skip
     """Fit the spread calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
     :func:`line_targets` units): per class of line when ``classes`` is given (else one
     class, strata weighing equally), :func:`class_fit`, then the standardised errors'
     quantiles (``ens.shape``); where the model has <F> offset or compression terms,
     also the factor those intervals take on the model's own half-width
-    (:func:`~stickslip.estimators.offsets.fit_friction_factor`, on ``cs.m3_nN``).
+    (:func:`~stickslip.estimators.offsets.fit_friction_factor`, on ``cs.m3_nN``). With
+    ``evidence``, each line's calibrated std then takes a factor on what the line shows
+    (:func:`evidence_fit`, :mod:`stickslip.estimators.evidence`).
     Returns the standardised predictive means, the calibrated ``|z|`` and the class of
     every calibration line."""
     ens.scale, ens.exponent, ens.shape, ens.classes = np.ones(len(TARGETS)), None, None, classes
-    ens.friction_factor = None
+    ens.friction_factor = ens.evidence = ens.evidence_range = None
     mu, sd = predict_std_lines(ens, cs.lines, cs.C)
     err = np.abs(mu - _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean,
                                             ens.y_std).numpy())  # fmt: skip
@@ -460,15 +569,22 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
         cls = classes.classify_lines(cs.lines, cs.C[:, 0].numpy().astype(float) + 1.0)
         n_classes = classes.n
     scale, exponent = class_fit(err, sd, cls, n_classes, cs.strata, power)
-    z_cal = err / (scale[cls] * sd ** exponent[cls])
+    std = scale[cls] * sd ** exponent[cls]
     per_class = classes is not None
     ens.scale, ens.exponent = (scale, exponent) if per_class else (scale[0], exponent[0])
     # weighed as in the fit: lines equally within classes, strata equally without
     w = np.ones(cls.size) if per_class else _stratum_weights(cs.strata)
+    if evidence:
+        e = line_evidence(cs.lines, ens.spec.lattice_nm / ens.spec.pixel_nm)
+        ens.evidence_range = np.array([e.min(axis=0), e.max(axis=0)])
+        r = np.log(err + 1e-12) - np.log(std)
+        ens.evidence = np.array([evidence_fit(r[:, j], e, w) for j in range(err.shape[1])])
+        std = std * np.exp(ens.evidence[:, 0][None, :] + e @ ens.evidence[:, 1:].T)
+    z_cal = err / std
     ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
                           for j in range(z_cal.shape[1])])  # fmt: skip
     if ens.offset is not None or ens.compression is not None:
-        sd_F = (scale[cls, 0] * sd[:, 0] ** exponent[cls, 0]) * float(ens.y_std[0])  # nN
+        sd_F = std[:, 0] * float(ens.y_std[0])  # nN
         # signed error against what the line shows (friction + offset), both relative to
         # the line's own mean as the members answer it
         target = Y_cal[:, 0] - cs.observed_mean
@@ -574,13 +690,14 @@ def _prepare_rows(
 ) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
     """:func:`prepare_batch` of training rows (run in the loader's workers)."""
     a, v = params["lattice_nm"][rows], params["velocity_nm_per_s"][rows]
+    T = _temperatures(params, rows)
     if config.families is not None:
         return prepare_family_batch(force_nN, a, v, params["F_mean_nN"][rows], x_nm, spec,
-                                    config, rng, crop=spec.crop,
-                                    keep_clean=keep_clean)  # fmt: skip
+                                    config, rng, crop=spec.crop, keep_clean=keep_clean,
+                                    temperature_K=T)  # fmt: skip
     return prepare_batch(force_nN, a, v, x_nm, spec, config.effects, rng, crop=spec.crop,
-                         clean_fraction=config.clean_fraction,
-                         keep_clean=keep_clean)  # fmt: skip
+                         clean_fraction=config.clean_fraction, keep_clean=keep_clean,
+                         temperature_K=T, coarse_fraction=config.coarse_fraction)  # fmt: skip
 
 
 def train_line_ensemble(
@@ -632,7 +749,8 @@ def train_line_ensemble(
     Xv = line_inputs(vs.lines, spec)  # cropped to a common length, to follow the loss
     Cv, Ev = vs.C, ens.expert_for(Xv)
     Yv = _standardise_friction(Y[vs.rows], vs.observed_mean, y_mean, y_std)
-    columns = ("lattice_nm", "velocity_nm_per_s")
+    columns = tuple(k for k in ("lattice_nm", "velocity_nm_per_s", "temperature_K")
+                    if k in params)  # fmt: skip
     if config.families is not None:
         columns += ("F_mean_nN",)
     prepare = partial(_prepare_rows, params={k: params[k] for k in columns}, x_nm=x_nm,
@@ -643,7 +761,8 @@ def train_line_ensemble(
         batches = LineBatches(source, train, flat_substrate(params), prepare, config.batch_size,
                               config.pristine_fraction, config.seed, k, stream)  # fmt: skip
         steps_per_epoch = max(1, batches.batches_per_epoch())
-        net = LineCNN(channels=config.channels, n_expert=N_EXPERT if expert else 0,
+        net = LineCNN(channels=config.channels, n_cond=n_conditions(spec),
+                      n_expert=N_EXPERT if expert else 0,
                       spread_hidden=config.spread_hidden)  # fmt: skip
         opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         sched = torch.optim.lr_scheduler.OneCycleLR(

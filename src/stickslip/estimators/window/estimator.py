@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from stickslip.conditions import Conditions
+from stickslip.conditions import TEMPERATURE_TOLERANCE_K, Conditions
 from stickslip.estimators.base import TraceEstimator
 from stickslip.estimators.domain import ETA_EDGE
 from stickslip.estimators.window.inference import OUTPUTS, TraceEstimate, predict_traces
@@ -13,7 +13,6 @@ from stickslip.estimators.window.modelfile import TrainedModel
 from stickslip.traces.trace import Trace
 
 VELOCITY_TOLERANCE = 0.01  # relative velocity mismatch that earns a note
-TEMPERATURE_TOLERANCE_K = 1.0
 
 
 class WindowEstimator(TraceEstimator):
