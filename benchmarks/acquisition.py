@@ -610,6 +610,7 @@ def main() -> None:
         doc = {"description": "issue 41 held-out acquisition sets, scored by "
                "benchmarks/acquisition.py", "command": " ".join(sys.argv), "model": model,
                "model_sha256": model_sha256, "code": prov,
+               "date": time.strftime("%Y-%m-%d"),
                "machine": mach, "draw": asdict(draw), "alpha": ALPHA, "sets": results,
                "timing_s": timing, "total_wall_s": total}  # fmt: skip
         args.json.parent.mkdir(parents=True, exist_ok=True)

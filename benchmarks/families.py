@@ -82,6 +82,7 @@ from stickslip.estimators.pairs import pair_friction, pair_parameters
 from stickslip.estimators.table import TARGETS, domain_verdict
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
+from stickslip.jobs.train import BundledRecipe
 from stickslip.simulators import effects as fx
 from stickslip.simulators.bench import (
     BENCH_SEED,
@@ -91,7 +92,11 @@ from stickslip.simulators.bench import (
     in_eta_window,
 )
 from stickslip.simulators.instrument import LAB
-from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
+from stickslip.simulators.randomised import (
+    RandomisedConfig,
+    cached_randomised_set,
+    with_dynamics,
+)
 from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -117,14 +122,18 @@ def score(estimator: LineEstimator, data: Dataset) -> dict:
             "U0_rel_rmse": m["U0_eV"]["rel_rmse"], "K_rel_rmse": m["K_N_m"]["rel_rmse"],
             "F_rmse_nN": m["F_mean_nN"]["rmse"], "in_domain": len(inside) / len(names),
             "n_in_domain": len(inside),
+            "interval_score95": {k: m[k].get("interval_score95") for k in KEYS},
+            "rel_halfwidth95": {k: m[k].get("rel_halfwidth95") for k in KEYS},
+            "sharpness95": {k: m[k].get("sharpness95") for k in KEYS},
             "coverage95_in_domain": {k: m_in[k]["coverage95"] if m_in else None
                                      for k in KEYS}}  # fmt: skip
 
 
 def line(name: str, r: dict) -> str:
     cov = " ".join(f"{r['coverage95'][k]:.3f}" for k in KEYS)
+    sharp = " ".join(f"{r['sharpness95'][k]:5.2f}" for k in ("U0_eV", "K_N_m"))
     return (f"  {name:26s} {r['n']:4d}  {cov}   {r['U0_rel_rmse']:6.2%} {r['K_rel_rmse']:6.2%} "
-            f"{r['F_rmse_nN']:.3f}  {r['in_domain']:.2f}")  # fmt: skip
+            f"{r['F_rmse_nN']:.3f}  {r['in_domain']:.2f}  {sharp}")  # fmt: skip
 
 
 def pair_rows(pool: Dataset, prior: fx.NuisancePrior, seed: int) -> tuple[Dataset, Dataset]:
@@ -192,7 +201,8 @@ def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> d
     return out
 
 
-HEAD = f"  {'set':26s} {'n':>4s}  95 % cov <F>  U0    K     eta     U0 rel  K rel  <F> nN  in dom"
+HEAD = (f"  {'set':26s} {'n':>4s}  95 % cov <F>  U0    K     eta     U0 rel  K rel  <F> nN  in dom"
+        "  sharpness U0 K")
 
 
 def main() -> None:
@@ -225,10 +235,12 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}; torch threads {args.threads}")  # fmt: skip
-    cal_pool = cached_randomised_set(RandomisedConfig(n=args.n_cal, seed=CAL_SEED, chunk=100),
+    # the pools follow the training prior: its dynamics and acquisition where it has them
+    pool = with_dynamics if BundledRecipe().dynamics else (lambda c: c)
+    cal_pool = cached_randomised_set(pool(RandomisedConfig(n=args.n_cal, seed=CAL_SEED)),
                                      args.work)  # fmt: skip
-    eval_pool = cached_randomised_set(RandomisedConfig(n=args.n_eval, seed=args.eval_seed,
-                                                       chunk=100), args.work)  # fmt: skip
+    eval_pool = cached_randomised_set(pool(RandomisedConfig(n=args.n_eval, seed=args.eval_seed)),
+                                      args.work)  # fmt: skip
     prior = fx.NuisancePrior()
     sets = {"clean": eval_pool,
             "all families": draw_family_lines(eval_pool, prior, all_seed).data}  # fmt: skip

@@ -15,7 +15,7 @@ default) and without it (``no verdict``), and the ratio of the two throughputs p
 (issue target: at least 0.70). Run it on a quiet machine.
 
 Usage: python benchmarks/inference_speed.py [--n 20000] [--repeats 5] [--threads 2]
-       [--model window | --line]
+       [--model window | --line | FILE [--embedding-reference NPZ]]
 """
 
 from __future__ import annotations
@@ -28,7 +28,9 @@ import time
 import numpy as np
 import torch
 
+from stickslip.estimators.domain import EmbeddingReference
 from stickslip.estimators.line.ensemble import predict_raw_lines
+from stickslip.estimators.line.estimator import fingerprint
 from stickslip.estimators.load import load_estimator
 from stickslip.estimators.window.inference import predict_array
 from stickslip.traces.trace import Trace
@@ -62,8 +64,9 @@ def kernel(estimator, force: np.ndarray, x: np.ndarray, a: float):
         return lambda: predict_array(estimator.model, f32)
     if estimator.kind == "line":
         xs, fs = [x] * n, list(force)
-        return lambda: predict_raw_lines(estimator.ensemble, xs, fs, np.full(n, a),
-                                         np.full(n, 60.0))  # fmt: skip
+        v, T = np.full(n, 60.0), np.full(n, 296.0)
+        return lambda: predict_raw_lines(estimator.ensemble, xs, fs, np.full(n, a), v,
+                                         temperature_K=T)  # fmt: skip
     return None
 
 
@@ -85,6 +88,9 @@ def main() -> None:
                         help="window (bundled paper MLP), default (bundled line model), "
                         "classical, or a model file")  # fmt: skip
     parser.add_argument("--line", action="store_true", help="Time the bundled line model.")
+    parser.add_argument("--embedding-reference", default=None,
+                        help="a line model file's own domain reference (.npz), where "
+                        "it is not the bundled one (an earlier model's full verdict)")  # fmt: skip
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     load = f", load average {os.getloadavg()[0]:.1f}" if hasattr(os, "getloadavg") else ""
@@ -92,6 +98,11 @@ def main() -> None:
           f"{os.cpu_count()} cores{load}, python {platform.python_version()}, "
           f"torch {torch.__version__}")  # fmt: skip
     estimator = load_estimator(None if args.line else args.model)
+    if args.embedding_reference:
+        ref = EmbeddingReference.load(args.embedding_reference)
+        if ref.fingerprint != fingerprint(estimator.ensemble):
+            parser.error(f"{args.embedding_reference} is not this model's reference")
+        estimator.embedding_reference = ref
     print(f"estimator: {estimator.describe()}")
     rng = np.random.default_rng(0)
     x = np.arange(512) * (11.0 / 512)
