@@ -28,10 +28,14 @@ spike burst on a line). Per-line estimates: the bundled line model (``load_estim
 as ``infer``), with the domain verdict. sigma_sys is calibrated on the calibration set
 (seed 4211: coverage 0.95 of the pooled 95 % interval, per target and per one/both
 directions) and written to ``src/stickslip/resources/map_pooling.json`` with ``--write``;
-every figure below is scored on the scoring set (seed 4223).
+so is each evidence's flag threshold (``evidence_z``: the robust score of a line's
+``evidence_slow`` / ``evidence_spikes`` against its map's own lines that about
+``EVIDENCE_RATE`` of the calibration set's lines exceed, a line counted once for both
+directions). Every figure below is scored on the scoring set (seed 4223; ``--seed``
+scores on another, for development runs that must not tune on 4223).
 
 Usage: NUMBA_NUM_THREADS=1 python benchmarks/map_pooling.py [--maps 300] [--cal-maps 150]
-       [--work build/map_pooling] [--write]
+       [--work build/map_pooling] [--seed 4223] [--write]
 """
 
 from __future__ import annotations
@@ -49,6 +53,7 @@ import numpy as np
 
 import stickslip.estimators.classical  # noqa: F401  (import order of the estimators package)
 from stickslip.estimators import pooling as pl
+from stickslip.estimators.evidence import EVIDENCE
 from stickslip.estimators.load import load_estimator
 from stickslip.jobs import infer as inf
 from stickslip.simulators import PhysicalSettings, simulate
@@ -64,6 +69,9 @@ N_POINTS, POOL, PARTNER_POOL, SMOOTH_POOL, DEFECT_POOL = 6, 128, 64, 96, 8
 KINDS = ("homogeneous", "tip", "domain", "smooth", "outliers")
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m")
 V0, T0, A = 60.0, 296.0, 0.246
+#: Share of the calibration set's (normal) lines each evidence may flag: two evidences
+#: and the estimate flags together stay within the target of 2 % of normal lines.
+EVIDENCE_RATE = 0.005
 
 
 # ---------------------------------------------------------------------------- line pools
@@ -236,8 +244,22 @@ def run_maps(kind: str, count: int, P: dict, seed: int, est, cal: pl.PoolingCali
                "outliers": outliers, "flagged": np.zeros(n, bool), "outlier_kind": None}
         if kind == "outliers":
             rec["outlier_kind"] = kind_o
-        for i in res.reasons:
+        rec["why"] = [""] * n  # the reason of a flagged line (either direction's)
+        # left out of the pool in either direction: flagged, or already without a usable
+        # estimate (refused, out of domain: the verdict leaves many spike lines out)
+        rec["left_out"] = np.zeros(n, bool)
+        for r in table.rows:
+            if r.get("quality") != "ok" or r.get("in_domain") is False:
+                rec["left_out"][r["line"]] = True
+        for i, why in res.reasons.items():
+            rec["left_out"][table.rows[i]["line"]] = True
             rec["flagged"][table.rows[i]["line"]] = True
+            rec["why"][table.rows[i]["line"]] = why
+        # each line's evidence scores against its map, the larger of its two directions'
+        rec["evidence"] = np.full((n, len(EVIDENCE)), -np.inf)
+        for i, sc in pl.evidence_scores_by_row(table.rows).items():
+            ln = table.rows[i]["line"]
+            rec["evidence"][ln] = np.fmax(rec["evidence"][ln], sc)
         # single-line 95 % half-widths (relative for U0, K; nN for <F>)
         rec["single"] = {k: float(np.nanmedian([
             (r[f"{k}_hi95"] - r[f"{k}_lo95"]) / 2 / (r[k] if k != "F_mean_nN" else 1.0)
@@ -286,6 +308,36 @@ def calibrate(maps: list[dict], floor: float = 0.005) -> tuple[dict, dict]:
     return out["single"], out["both"]
 
 
+def evidence_thresholds(maps: list[dict], rate: float = EVIDENCE_RATE) -> dict[str, float]:
+    """Per evidence, the robust score that a share ``rate`` of the lines of ``maps``
+    (normal lines; each counted once, by the larger score of its two directions) exceed."""
+    S = np.concatenate([m["evidence"] for m in maps])
+    out = {}
+    for j, k in enumerate(EVIDENCE):
+        col = S[:, j][np.isfinite(S[:, j])]
+        out[k] = round(float(np.quantile(col, 1.0 - rate)), 2) if col.size else \
+            pl.DEFAULT_EVIDENCE_Z[k]  # fmt: skip
+    return out
+
+
+def flag_rates(maps: list[dict], which: str, target: str) -> str:
+    """Share of ``which`` lines (``outliers`` or ``normal``) flagged by the pool (against
+    ``target``), by what, and the share left out of the pool for any reason (flagged or
+    out of domain)."""
+    pick = [(m["flagged"][i], m["why"][i], m["left_out"][i]) for m in maps
+            for i in range(m["n"]) if bool(m["outliers"][i]) == (which == "outliers")]  # fmt: skip
+    if not pick:
+        return "no lines"
+    n = len(pick)
+    ev = {k: sum(1 for _, w, _ in pick if w.startswith(pl.EVIDENCE_REASON)
+                 and pl.EVIDENCE_TEXT[k] in w) / n for k in EVIDENCE}  # fmt: skip
+    est = sum(1 for _, w, _ in pick if w == pl.OUTLIER_REASON) / n
+    out = sum(1 for *_, lo in pick if lo) / n
+    return (f"{sum(f for f, *_ in pick) / n:.4f} flagged (target {target}; by evidence: "
+            + ", ".join(f"{k} {v:.4f}" for k, v in ev.items()) + f"; by estimate {est:.4f}); "
+            f"{out:.4f} left out of the pool (flagged or out of domain)")
+
+
 def coverage(maps: list[dict], dirs: tuple[str, ...], k: str) -> float:
     hits = []
     for m in maps:
@@ -302,6 +354,8 @@ def main() -> None:
     ap.add_argument("--cal-maps", type=int, default=120, help="homogeneous calibration maps")
     ap.add_argument("--change-maps", type=int, default=60, help="per kind: tip change, domain")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "map_pooling")
+    ap.add_argument("--seed", type=int, default=SCORE_SEED,
+                    help=f"scoring seed (default {SCORE_SEED}; another for development runs)")
     ap.add_argument("--write", action="store_true", help="write the calibration resource")
     args = ap.parse_args()
     print(f"map pooling benchmark: {platform.node()} ({platform.processor() or platform.machine()},"
@@ -315,24 +369,31 @@ def main() -> None:
     Pc = pools(CAL_SEED, args.work, smooth=False)
     cal_maps = run_maps("homogeneous", args.cal_maps, Pc, CAL_SEED, est, zero)
     single, both = calibrate(cal_maps)
+    evidence_z = evidence_thresholds(cal_maps)
     base = pl.bundled_calibration()
     config = {"benchmark": "benchmarks/map_pooling.py", "calibration_seed": CAL_SEED,
-              "scoring_seed": SCORE_SEED, "calibration_maps": args.cal_maps,
+              "scoring_seed": args.seed, "calibration_maps": args.cal_maps,
+              "evidence_rate": EVIDENCE_RATE,
               "lines": SIZES.tolist(), "line_weights": SIZE_WEIGHTS.tolist(),
               "estimator": est.describe(), "target": "95 % coverage of the pooled interval",
               "date": dt.date.today().isoformat()}  # fmt: skip
     cal = pl.PoolingCalibration(sys_single=single, sys_both=both, flag_z=base.flag_z,
                                 change_level=base.change_level, min_segment=base.min_segment,
+                                min_shift=base.min_shift, evidence_z=evidence_z,
                                 config=config)  # fmt: skip
     print(f"calibrated on seed {CAL_SEED} ({args.cal_maps} maps): sigma_sys one direction "
-          f"{single}; both {both}")  # fmt: skip
+          f"{single}; both {both}; evidence flag thresholds {evidence_z} (robust scores; "
+          f"{EVIDENCE_RATE:.1%} of the calibration lines above each)")  # fmt: skip
     if args.write:
         cal.save(ROOT / "src" / "stickslip" / "resources" / pl.CALIBRATION_FILE)
         print(f"wrote src/stickslip/resources/{pl.CALIBRATION_FILE}")
     # -- scoring set
-    P = pools(SCORE_SEED, args.work, smooth=True)
-    homo = run_maps("homogeneous", args.maps, P, SCORE_SEED, est, cal)
-    print(f"\n== homogeneous maps (seed {SCORE_SEED}): {len(homo)} maps, "
+    seed = args.seed
+    if seed != SCORE_SEED:
+        print(f"development run: scored on seed {seed}, not the scoring set {SCORE_SEED}")
+    P = pools(seed, args.work, smooth=True)
+    homo = run_maps("homogeneous", args.maps, P, seed, est, cal)
+    print(f"\n== homogeneous maps (seed {seed}): {len(homo)} maps, "
           f"{sum(m['n'] for m in homo)} lines per direction")  # fmt: skip
     for dirs, label in ((("trace", "retrace"), "one direction"), (("both",), "both")):
         print(f"pooled 95 % coverage, {label}: " + ", ".join(
@@ -358,12 +419,10 @@ def main() -> None:
     fa = [any(g["change_line"] is not None for g in m["groups"] if g["segment"] == "all")
           for m in homo]  # fmt: skip
     print(f"false change points: {np.mean(fa):.3f} of homogeneous maps (target <= 0.05)")
-    normal_flags = np.concatenate([m["flagged"] for m in homo])
-    print(f"normal lines flagged (homogeneous maps): {normal_flags.mean():.4f} "
-          "(target <= 0.02)")  # fmt: skip
+    print(f"normal lines (homogeneous maps): {flag_rates(homo, 'normal', '<= 0.02')}")
     # -- change maps
     for kind in ("tip", "domain"):
-        maps = run_maps(kind, args.change_maps, P, SCORE_SEED, est, cal)
+        maps = run_maps(kind, args.change_maps, P, seed, est, cal)
         hit = []
         for m in maps:
             found = [g["change_line"] for g in m["groups"]
@@ -373,7 +432,7 @@ def main() -> None:
         print(f"{kind} maps ({what}; {len(maps)}): change found within 3 lines in "
               f"{np.mean(hit):.3f} (target >= 0.80)")  # fmt: skip
     # -- smooth maps
-    smooth = run_maps("smooth", 30, P, SCORE_SEED, est, cal)
+    smooth = run_maps("smooth", 30, P, seed, est, cal)
     taus = [g["U0_eV_tau"] for m in smooth for g in m["groups"]
             if g["segment"] == "all" and g["direction"] == "both"]  # fmt: skip
     ch = np.mean([any(g["change_line"] is not None for g in m["groups"]) for m in smooth])
@@ -381,13 +440,13 @@ def main() -> None:
           f"(sinusoid rms 0.141); change reported in {ch:.2f}; coverage of mean U0 (both) "
           f"{coverage(smooth, ('both',), 'U0_eV'):.2f}")  # fmt: skip
     # -- outliers
-    outl = run_maps("outliers", 60, P, SCORE_SEED, est, cal)
+    outl = run_maps("outliers", 60, P, seed, est, cal)
     for ok in ("defect", "spikes"):
         sel = [m for m in outl if m["outlier_kind"] == ok]
-        o = np.concatenate([m["flagged"][m["outliers"]] for m in sel])
-        nrm = np.concatenate([m["flagged"][~m["outliers"]] for m in sel])
-        print(f"outlier lines ({ok}, {len(sel)} maps, {o.size} lines): {o.mean():.3f} flagged "
-              f"(target >= 0.80); normal lines in those maps flagged {nrm.mean():.4f}")
+        n_o = sum(int(m["outliers"].sum()) for m in sel)
+        print(f"outlier lines ({ok}, {len(sel)} maps, {n_o} lines): "
+              f"{flag_rates(sel, 'outliers', '>= 0.80')}")
+        print(f"  normal lines in those maps: {flag_rates(sel, 'normal', '<= 0.02')}")
     # -- cost on a 512-line map
     clean = _take(P["base"][0], 512, np.random.default_rng(4290))
     traces, _ = make_map(clean, np.random.default_rng(4291), "cost.gwy",
@@ -404,7 +463,7 @@ def main() -> None:
           "and is slower still)")  # fmt: skip
     print(f"total {time.time() - t_start:.0f} s")
     (args.work / "last_run.json").write_text(json.dumps(
-        {"single": single, "both": both, "config": config}, indent=1))
+        {"single": single, "both": both, "evidence_z": evidence_z, "config": config}, indent=1))
 
 
 if __name__ == "__main__":

@@ -76,7 +76,14 @@ OTHER_COLUMNS = {
     "domain_reason": "why a row is out of domain (see the how-to on the reasons)",
     "stick_slip_check": "the classical refusal that put a low-eta row out of domain",
     "F_model_std_nN": "the line model's own ⟨F⟩ spread, without offsets, nN",
-    "map_reason": "why a map line was left out of its map's pooled answer",
+    "evidence_slow": "line model: what the line shows of slow, non-periodic content (drift, "
+                     "a defect, a step): ln of the RMS left once the lattice-periodic profile "
+                     "is taken off and the rest averaged over a period, over the profile's "
+                     "std; dimensionless",
+    "evidence_spikes": "line model: what the line shows of spikes: ln of its largest second "
+                       "difference over their robust scale (MAD); dimensionless",
+    "map_reason": "why a map line was left out of its map's pooled answer (inconsistent "
+                  "with its map, or showing what its other lines do not)",
     "n_windows": "window MLP: number of windows", "F_mean_net": "window MLP: the network's ⟨F⟩",
     "gof": "`--check`: RMS z-score of the posterior predictive check (about 1 or below: fits)",
     "ppc_flag": "`--check`: 1 where gof > 3", "masked_pixels": "NaN pixels interpolated",
@@ -89,7 +96,8 @@ GROUP_TEXT = {
     "n_lines": "number of lines in the group",
     "n_left_out": "lines without an estimate, out of domain, or flagged",
     "change_line": "first line after a change along the slow scan axis",
-    "flagged_lines": "lines left out as inconsistent with the map", "note": "a remark",
+    "flagged_lines": "lines left out as inconsistent with the map or unlike its other "
+                     "lines (see `map_reason`)", "note": "a remark",
 }
 
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from stickslip.estimators.evidence import EVIDENCE, line_evidence
+from stickslip.estimators.evidence import EVIDENCE, line_evidence, line_evidence_batch
 from stickslip.simulators import PhysicalSettings, simulate
 
 PERIOD_PX = 0.246 / (11.0 / 512)
@@ -36,3 +36,18 @@ def test_evidence_has_no_force_scale_of_its_own():
     e1 = line_evidence([G], PERIOD_PX)
     e2 = line_evidence([10.0 * G + 3.0], PERIOD_PX)
     assert np.allclose(e1, e2, atol=1e-6)
+
+
+def test_the_batch_reads_the_same_evidence_as_line_by_line():
+    rng = np.random.default_rng(4249)
+    F = _clean_line()
+    x = np.arange(F.size)
+    lines = np.stack([F, F + 0.3 * x / x[-1], F + rng.normal(0, 0.05, F.size),
+                      rng.normal(0, 1.0, F.size), np.full(F.size, 2.0)])  # fmt: skip
+    lines[2, 100] += 3.0
+    for period in (PERIOD_PX, 7.3, 20.0):
+        want = line_evidence(list(lines), period)
+        assert np.allclose(line_evidence_batch(lines, period), want, rtol=1e-9, atol=1e-9)
+    # lines too short to read: zeros, as line by line
+    assert (line_evidence_batch(lines[:, :20], PERIOD_PX) == 0).all()
+    assert line_evidence_batch(np.empty((0, 300)), PERIOD_PX).shape == (0, len(EVIDENCE))

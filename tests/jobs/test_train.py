@@ -64,7 +64,11 @@ def test_bundled_recipe_data_stays_on_disk_and_records_its_parts(tmp_path):
     d = training.data
     assert d.n == 6 + 6 + 4 + 4 and isinstance(d.force_nN, Rows)  # streamed, not loaded
     assert len(training.parts) == 4 and all(p["fingerprint"] for p in training.parts)
-    first = load_dataset(tmp_path / "randomised_6_11.h5")
+    from stickslip.simulators.randomised import RandomisedConfig, cache_path, with_dynamics
+
+    # the recipe randomises the dynamics: the set's file carries its config's digest
+    first = load_dataset(cache_path(with_dynamics(RandomisedConfig(n=6, seed=11)), tmp_path))
+    assert np.ptp(first.params["temperature_K"]) > 0
     np.testing.assert_array_equal(d.force_nN[:6], first.force_nN)
     # a second call reuses the cached sets
     again = bundled_line_data(tmp_path, recipe, progress=False)

@@ -720,7 +720,8 @@ def _groups_section(pooled: Sequence[Mapping[str, Any]]) -> str:
         "maps. 'both': trace and retrace together (an offset that does not reverse cancels). "
         "tau: the spread between lines (log units for U0, K, eta: a relative spread; nN for "
         "<F>) with its 95 % Q-profile interval. 'left out': lines without an estimate, out "
-        "of domain, or outside their map's predictive interval (map_reason). Where the lines "
+        "of domain, outside their map's predictive interval, or showing what the map's other "
+        "lines do not (spikes, a defect: map_reason). Where the lines "
         "change along the slow scan axis (a tip change, a domain) the change line is given "
         "and each side is pooled on its own (before / after).")
     return table + f'\n<p class="caption">{_esc(caption)}</p>'
@@ -878,7 +879,8 @@ def _map_figure(
         + "). Right: estimates per line, "
         + (f"shaded {level}" if level else "no intervals")
         + "; grey: plain mean of the line; red x: flagged line; orange circle: a line "
-        "inconsistent with its map (left out of the per-map answer); dashed: change point "
+        "left out of the per-map answer (inconsistent with its map, or unlike its other lines: "
+        "map_reason); dashed: change point "
         "along the slow scan axis"
         + ("; in domain: green yes, red no, grey not judged" if has_domain else "")
         + "."

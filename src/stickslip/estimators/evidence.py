@@ -31,48 +31,71 @@ import numpy as np
 
 #: The evidence's names, in the order of :func:`line_evidence`'s columns.
 EVIDENCE = ("slow", "spikes")
+#: The result table's columns that carry a line's evidence (the line model writes them;
+#: the per-map pooling reads them, :mod:`stickslip.estimators.pooling`).
+EVIDENCE_COLUMNS = tuple(f"evidence_{e}" for e in EVIDENCE)
 
 _TINY = 1e-9
 
 
-def _slow(F: np.ndarray, period_px: float) -> float:
-    n = F.size
+def _batch(F: np.ndarray, period_px: float) -> np.ndarray:
+    """:func:`line_evidence` of B lines of one length L, (B, 2), vectorised over lines."""
+    B, n = F.shape
     bins = max(2, int(round(period_px)))
-    phase = np.floor((np.arange(n) % period_px) / period_px * bins).astype(int)
-    phase = np.minimum(phase, bins - 1)
-    counts = np.bincount(phase, minlength=bins)
-    profile = np.bincount(phase, weights=F, minlength=bins) / np.maximum(counts, 1)
-    resid = F - profile[phase]
+    phase = np.minimum(np.floor((np.arange(n) % period_px) / period_px * bins).astype(int),
+                       bins - 1)  # fmt: skip
+    onehot = np.zeros((n, bins))
+    onehot[np.arange(n), phase] = 1.0
+    profile = (F @ onehot) / np.maximum(onehot.sum(axis=0), 1.0)  # (B, bins)
+    resid = F - profile[:, phase]
+    # the residual averaged over one period (a moving mean of `bins` samples)
     w = min(bins, n)
-    smooth = np.convolve(resid, np.full(w, 1.0 / w), mode="valid")
-    rms = float(np.sqrt(np.mean((smooth - smooth.mean()) ** 2))) if smooth.size else 0.0
-    return float(np.log(rms / (float(np.std(profile)) + _TINY) + 1e-3))
+    cs = np.concatenate([np.zeros((B, 1)), np.cumsum(resid, axis=1)], axis=1)
+    smooth = (cs[:, w:] - cs[:, :-w]) / w
+    rms = smooth.std(axis=1)
+    slow = np.log(rms / (profile.std(axis=1) + _TINY) + 1e-3)
+    d2 = np.diff(F, 2, axis=1)
+    mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=1, keepdims=True)), axis=1)
+    spikes = np.log(np.abs(d2).max(axis=1) / (mad + _TINY) + 1.0)
+    return np.column_stack([slow, spikes])
 
 
-def _spikes(F: np.ndarray) -> float:
-    d2 = np.diff(F, 2)
-    if d2.size < 3:
-        return 0.0
-    mad = 1.4826 * float(np.median(np.abs(d2 - np.median(d2))))
-    return float(np.log(float(np.max(np.abs(d2))) / (mad + _TINY) + 1.0))
-
-
-def line_evidence(lines: list[np.ndarray], period_px: float) -> np.ndarray:
+def line_evidence(lines: list[np.ndarray] | np.ndarray, period_px: float) -> np.ndarray:
     """Evidence of visible effects (:data:`EVIDENCE`) for mapped lines of any lengths.
 
     Parameters
     ----------
-    lines : list of ndarray
-        Mapped lines (force, nN) on a grid with ``period_px`` pixels per lattice period.
+    lines : list of ndarray, or ndarray (B, L)
+        Mapped lines (force, nN) on a grid with ``period_px`` pixels per lattice period;
+        lines of one length are computed together.
     period_px : float
         The lattice period in pixels of that grid.
 
     Returns
     -------
     ndarray (B, len(EVIDENCE))
+        Zeros for a line shorter than two periods (nothing to compare).
     """
-    out = np.empty((len(lines), len(EVIDENCE)))
-    for i, f in enumerate(lines):
-        F = np.asarray(f, float)
-        out[i] = (_slow(F, period_px), _spikes(F)) if F.size > 2 * period_px else (0.0, 0.0)
+    arrays = [np.asarray(f, float) for f in lines]
+    out = np.zeros((len(arrays), len(EVIDENCE)))
+    sizes = np.array([f.size for f in arrays], int)
+    for size in np.unique(sizes):
+        if size <= 2 * period_px:
+            continue
+        idx = np.flatnonzero(sizes == size)
+        out[idx] = _batch(np.stack([arrays[i] for i in idx]), period_px)
     return out
+
+
+def line_evidence_batch(lines: np.ndarray, period_px: float) -> np.ndarray:
+    """:func:`line_evidence` of B mapped lines of one length, an array (B, L).
+
+    Returns
+    -------
+    ndarray (B, len(EVIDENCE))
+        Zeros where the lines are shorter than two periods.
+    """
+    F = np.asarray(lines, float)
+    if F.shape[0] == 0 or F.shape[1] <= 2 * period_px:
+        return np.zeros((F.shape[0], len(EVIDENCE)))
+    return _batch(F, period_px)

@@ -51,6 +51,17 @@ Lines that break the pattern
   The fit that judges them starts robust (median, MAD) and is iterated without the
   flagged lines, so a few defect lines or spike bursts cannot widen ``tau`` enough to
   hide themselves.
+- *Lines that show what the rest of their map does not*: a line crossing a strong
+  defect or carrying a spike burst hardly moves its estimate (the line model is robust to
+  both), so the estimates cannot find it; what the line shows can. Each row's evidence
+  (``evidence_slow``, ``evidence_spikes``: :mod:`stickslip.estimators.evidence`,
+  dimensionless, written by the line model) is scored against the group's own evidence,
+  ``(e_i - median) / (1.4826 MAD)`` over the usable lines (:func:`evidence_scores`), and a
+  line whose score exceeds :attr:`PoolingCalibration.evidence_z` is flagged with a reason
+  naming what it shows and left out of the pool (before the estimates are judged, so it
+  widens nothing). The scale is the map's own, so no scale in nN or nm enters; rows
+  without the columns (other estimators, older tables) are judged by their estimates
+  only.
 - *A change along the slow scan axis* (a tip change, a domain of another material from
   some line on): a two-segment Gaussian mean-shift model on the lines' estimates in
   line order (ln U0, ln K, <F> relative to its median; winsorised at 4 robust standard deviations),
@@ -62,7 +73,8 @@ Lines that break the pattern
   the first line of the second segment; each side is then pooled on its own.
 
 Everything here is a pure function of the rows (mappings with the result table's column
-names); the module imports nothing from the rest of the package.
+names); the module imports nothing from the rest of the package but the evidence's
+names (:mod:`stickslip.estimators.evidence`, numpy only).
 """
 
 from __future__ import annotations
@@ -79,6 +91,8 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
+from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS
+
 #: Pooled targets and whether each is pooled on a log scale.
 POOL_TARGETS: dict[str, bool] = {"F_mean_nN": False, "U0_eV": True, "K_N_m": True, "eta": True}
 #: Targets whose lines are judged for outliers and change points (eta follows from U0, K).
@@ -90,6 +104,19 @@ CHI2_1_MEDIAN = float(stats.chi2.ppf(0.5, 1))
 MIN_BIRGE_LINES = 32
 CALIBRATION_FILE = "map_pooling.json"
 OUTLIER_REASON = "inconsistent with its map: outside the map's predictive interval"
+#: What each evidence says a line shows, in the reason of a line flagged for it.
+EVIDENCE_TEXT = {"slow": "slow, non-periodic content (a defect or a step)", "spikes": "spikes"}
+EVIDENCE_REASON = "shows what the other lines of its map do not: "
+#: Robust score above which a line is flagged for an evidence, where the calibration
+#: file names none: what 0.5 % of the lines of seed 4211's homogeneous maps exceed
+#: (``benchmarks/map_pooling.py``, 40 maps). The spikes' scores have a long tail (a
+#: line's noise, drawn per line, sets how far its slips stand out of it).
+DEFAULT_EVIDENCE_Z = {"slow": 3.1, "spikes": 7.3}
+#: Fewest lines with evidence whose median and MAD may judge one of them.
+MIN_EVIDENCE_LINES = 8
+#: Least robust scale of an evidence (ln units, dimensionless): lines that agree closer
+#: than this (copies of one line) are not told apart by rounding.
+EVIDENCE_SCALE_FLOOR = 0.02
 #: The groups table's columns, in order.
 GROUP_HEAD = ("group", "file", "channel", "direction", "load", "load_unit", "load_group",
               "segment", "lines", "n_lines", "n_left_out")  # fmt: skip
@@ -126,6 +153,11 @@ class PoolingCalibration:
         Smallest change reported: the two sides' means must differ by at least this in
         ln U0, ln K or <F> relative to its median (0.1: 10 %); a smaller shift on a
         large map is significant but no change of contact.
+    evidence_z : dict of str to float
+        Per evidence (:data:`~stickslip.estimators.evidence.EVIDENCE`), the robust score
+        (:func:`evidence_scores`) above which a line is flagged as showing what the other
+        lines of its map do not; chosen on the calibration maps so that few normal lines
+        pass it. Missing names take :data:`DEFAULT_EVIDENCE_Z`.
     config : dict
         How the constants were made (benchmark, seeds, maps, date).
     """
@@ -136,12 +168,17 @@ class PoolingCalibration:
     change_level: float = 0.99
     min_segment: int = 4
     min_shift: float = 0.1
+    evidence_z: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_EVIDENCE_Z))
     config: dict[str, Any] = field(default_factory=dict)
 
     def sys(self, key: str, direction: str) -> float:
         """``sigma_sys`` of a target for a direction (``trace``, ``retrace`` or ``both``)."""
         table = self.sys_both if direction == BOTH else self.sys_single
         return float(table.get(key, 0.0))
+
+    def evidence_threshold(self) -> np.ndarray:
+        """:attr:`evidence_z` in the order of :data:`~stickslip.estimators.evidence.EVIDENCE`."""
+        return np.array([float(self.evidence_z.get(k, DEFAULT_EVIDENCE_Z[k])) for k in EVIDENCE])
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -374,6 +411,57 @@ def flag_outliers(Y: np.ndarray, V: np.ndarray, z: float, max_iter: int = 10) ->
     return flags
 
 
+# ---------------------------------------------------------------------------- evidence
+
+
+def evidence_scores(E: np.ndarray) -> np.ndarray:
+    """Each line's evidence against its group's own: ``(e - median) / (1.4826 MAD)``.
+
+    Parameters
+    ----------
+    E : ndarray (n, p)
+        The group's lines' evidence (NaN: none).
+
+    Returns
+    -------
+    ndarray (n, p)
+        Robust scores, per column from the lines with a finite value (the MAD floored at
+        :data:`EVIDENCE_SCALE_FLOOR`); NaN where a line has no evidence or the column
+        fewer than :data:`MIN_EVIDENCE_LINES` lines.
+    """
+    E = np.atleast_2d(np.asarray(E, float))
+    out = np.full(E.shape, np.nan)
+    for j in range(E.shape[1]):
+        ok = np.isfinite(E[:, j])
+        if ok.sum() < MIN_EVIDENCE_LINES:
+            continue
+        med = float(np.median(E[ok, j]))
+        # the group's own scale, so a noisier map is judged by its own spread
+        s = max(1.4826 * float(np.median(np.abs(E[ok, j] - med))), EVIDENCE_SCALE_FLOOR)
+        out[ok, j] = (E[ok, j] - med) / s
+    return out
+
+
+def flag_evidence(E: np.ndarray, z: Sequence[float]) -> np.ndarray:
+    """Lines that show more of an evidence than their group: score above ``z`` (one per
+    column of ``E``). Only excess counts (a line that shows less is cleaner, not odd).
+
+    Returns
+    -------
+    ndarray (n, p) of bool
+    """
+    S = evidence_scores(E)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(S) & (S > np.asarray(z, float)[None, :])
+
+
+def evidence_reason(shown: Sequence[bool]) -> str:
+    """The reason of a line flagged for the evidence ``shown`` (bool per
+    :data:`~stickslip.estimators.evidence.EVIDENCE`)."""
+    return EVIDENCE_REASON + " and ".join(
+        EVIDENCE_TEXT[k] for k, on in zip(EVIDENCE, shown, strict=True) if on)
+
+
 # ---------------------------------------------------------------------------- change point
 
 
@@ -522,10 +610,12 @@ class _Lines:
     y: dict[str, np.ndarray]
     v: dict[str, np.ndarray]
     usable: np.ndarray
+    e: np.ndarray  # (n, len(EVIDENCE)) the rows' evidence, NaN where a row has none
 
     def take(self, sel: np.ndarray) -> _Lines:
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
-                      {k: a[sel] for k, a in self.v.items()}, self.usable[sel])  # fmt: skip
+                      {k: a[sel] for k, a in self.v.items()}, self.usable[sel],
+                      self.e[sel])  # fmt: skip
 
 
 def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
@@ -539,7 +629,9 @@ def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
     usable = np.array([_usable(r) for r in sub], bool)
     for key in JUDGED:
         usable &= np.isfinite(y[key]) & np.isfinite(v[key])
-    return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable)
+    e = np.array([[_num(r.get(c)) for c in EVIDENCE_COLUMNS] for r in sub], float)
+    return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable,
+                  e.reshape(len(sub), len(EVIDENCE_COLUMNS)))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -593,14 +685,23 @@ def _target_columns(key: str, p: TargetPool, log: bool) -> dict[str, float]:
 
 
 def _judge(lines: _Lines, cal: PoolingCalibration) -> np.ndarray:
-    """Outlier flags of usable lines (bool over all lines)."""
+    """Why each line is flagged (object array of str over all lines; "" where it is not):
+    usable lines that show what the others do not, then, among the rest, lines whose
+    estimates are outside the predictive interval."""
+    why = np.full(lines.index.size, "", object)
     sel = np.flatnonzero(lines.usable)
-    flags = np.zeros(lines.index.size, bool)
+    if sel.size:
+        shown = flag_evidence(lines.e[sel], cal.evidence_threshold())
+        odd = shown.any(axis=1)
+        for i, s in zip(sel[odd], shown[odd], strict=True):
+            why[i] = evidence_reason(s)
+        # judged without them: a defect line must not widen tau for the others
+        sel = sel[~odd]
     if sel.size:
         Y = np.column_stack([lines.y[k][sel] for k in JUDGED])
         V = np.column_stack([lines.v[k][sel] for k in JUDGED])
-        flags[sel] = flag_outliers(Y, V, cal.flag_z)
-    return flags
+        why[sel[flag_outliers(Y, V, cal.flag_z)]] = OUTLIER_REASON
+    return why
 
 
 def _change(parts: Sequence[_Lines], cal: PoolingCalibration) -> int | None:
@@ -633,7 +734,8 @@ class GroupResult:
         One row per group (columns :data:`GROUP_COLUMNS`).
     reasons : dict of int to str
         Row index of the result table -> why the line was left out of its map's pool
-        (outside the predictive interval).
+        (outside the predictive interval, :data:`OUTLIER_REASON`; or showing what the
+        other lines of its map do not, :func:`evidence_reason`).
     """
 
     groups: list[dict[str, Any]] = field(default_factory=list)
@@ -720,8 +822,9 @@ def pool_groups(rows: Sequence[Mapping[str, Any]],
                              ("after", [p.line >= change for p in parts])]  # fmt: skip
             for segment, sels in segments:
                 sub = [p.take(s) for p, s in zip(parts, sels, strict=True)]
-                flags = [_judge(p, cal) if segment != "all" or change is None
-                         else _judge_segmented(p, change, cal) for p in sub]  # fmt: skip
+                whys = [_judge(p, cal) if segment != "all" or change is None
+                        else _judge_segmented(p, change, cal) for p in sub]  # fmt: skip
+                flags = [w != "" for w in whys]
                 pools_by = {d: _pool_part(p, f, d, cal)
                             for d, p, f in zip(dirs, sub, flags, strict=True)}  # fmt: skip
                 pools = pools_by[dirs[0]] if len(dirs) == 1 else _pool_both(pools_by, cal)
@@ -732,18 +835,40 @@ def pool_groups(rows: Sequence[Mapping[str, Any]],
                                    "differ; see the before/after rows")  # fmt: skip
                 out.groups.append(row)
                 if segment == "all" and direction != BOTH:
-                    for p, f in zip(sub, flags, strict=True):
-                        for i in p.index[f]:
-                            out.reasons[int(i)] = OUTLIER_REASON
+                    for p, w in zip(sub, whys, strict=True):
+                        for i, why in zip(p.index, w, strict=True):
+                            if why:
+                                out.reasons[int(i)] = str(why)
     return out
 
 
 def _judge_segmented(lines: _Lines, change: int, cal: PoolingCalibration) -> np.ndarray:
-    """Outlier flags judged within each side of a change point."""
-    flags = np.zeros(lines.index.size, bool)
+    """Flags (:func:`_judge`) judged within each side of a change point."""
+    why = np.full(lines.index.size, "", object)
     for sel in (lines.line < change, lines.line >= change):
-        flags[sel] = _judge(lines.take(sel), cal)
-    return flags
+        why[sel] = _judge(lines.take(sel), cal)
+    return why
+
+
+def evidence_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, np.ndarray]:
+    """Each usable map line's evidence scores (:func:`evidence_scores`) against the other
+    usable lines of its map and direction (no change point split): row index -> (p,).
+
+    What :attr:`PoolingCalibration.evidence_z` is chosen on (``benchmarks/map_pooling.py``
+    takes a high quantile over the lines of homogeneous maps). Rows without evidence get
+    NaN scores.
+    """
+    out: dict[int, np.ndarray] = {}
+    for idx in map_keys(rows).values():
+        for d in DIRECTIONS:
+            lines = _lines(rows, [i for i in idx if rows[i].get("direction") == d])
+            sel = np.flatnonzero(lines.usable)
+            if not sel.size:
+                continue
+            S = evidence_scores(lines.e[sel])
+            for i, s in zip(lines.index[sel], S, strict=True):
+                out[int(i)] = s
+    return out
 
 
 def group_table(rows: Iterable[Mapping[str, Any]],

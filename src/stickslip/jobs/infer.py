@@ -282,7 +282,8 @@ MAP_REASON = "map_reason"
 def add_map_groups(result: InferResult) -> None:
     """Pool the map lines of the result per map, direction and load group
     (:func:`~stickslip.estimators.pooling.pool_groups`): ``result.groups``, and on every
-    line the pool left out as inconsistent with its map, ``map_reason``."""
+    line the pool left out (inconsistent with its map, or showing what the other lines
+    of its map do not) why, ``map_reason``."""
     pooled = pool_groups(result.table.rows)
     result.groups = [{c: g.get(c) for c in GROUP_COLUMNS} for g in pooled.groups]
     for i, reason in pooled.reasons.items():
@@ -291,9 +292,9 @@ def add_map_groups(result: InferResult) -> None:
         1 for g in result.groups if g["segment"] == "all" and g["change_line"] is not None)
     if n_flag or n_change:
         result.table.notes.append(
-            f"per-map pooling: {n_flag} line(s) inconsistent with their map (map_reason) left "
-            f"out of its answer; {n_change} group(s) with a change point along the slow scan "
-            "axis, pooled either side (groups table)")  # fmt: skip
+            f"per-map pooling: {n_flag} line(s) inconsistent with their map or unlike its "
+            f"other lines (map_reason) left out of its answer; {n_change} group(s) with a "
+            "change point along the slow scan axis, pooled either side (groups table)")  # fmt: skip
 
 
 def ppc_seed(name: str) -> int:

@@ -52,7 +52,7 @@ from stickslip.estimators.calibration import (
     gaussian_z,
     lognormal_std,
 )
-from stickslip.estimators.evidence import line_evidence
+from stickslip.estimators.evidence import line_evidence, line_evidence_batch
 from stickslip.estimators.mapping import to_reference
 from stickslip.estimators.offsets import (
     CompressionPrior,
@@ -404,12 +404,14 @@ class LineEnsemble:
     #: clipped (no extrapolation beyond what the fit saw)
     evidence_range: np.ndarray | None = None
 
-    def evidence_factor(self, X: torch.Tensor) -> np.ndarray:
-        """The factor on each input line's calibrated std, (B, n_targets) (1 without)."""
+    def evidence_factor(self, X: torch.Tensor, e: np.ndarray | None = None) -> np.ndarray:
+        """The factor on each input line's calibrated std, (B, n_targets) (1 without);
+        ``e``: the lines' evidence where already read (else read off ``X``)."""
         if self.evidence is None:
             return np.ones((X.shape[0], len(TARGETS)))
-        e = line_evidence(list(input_force_nN(X, self.spec)),
-                          self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
+        if e is None:
+            e = line_evidence_batch(input_force_nN(X, self.spec),
+                                    self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
         if self.evidence_range is not None:
             e = np.clip(e, self.evidence_range[0], self.evidence_range[1])
         b = np.asarray(self.evidence, float)
@@ -452,7 +454,7 @@ class LineEnsemble:
 
     @torch.inference_mode()
     def predict_std(self, X: torch.Tensor, C: torch.Tensor, features: np.ndarray | None = None,
-                    fused: list[LineCNN] | None = None
+                    fused: list[LineCNN] | None = None, evidence: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """Predictive mean and calibrated std in standardised target units (B, n_targets);
         the central interval at level ``q`` is ``mean +- z_at(q) * std``.
@@ -460,6 +462,8 @@ class LineEnsemble:
         ``features``: an array (members, B, :attr:`LineCNN.n_features`) to fill with what
         each member's head read for each line (the domain verdict's embedding), at no
         extra cost. ``fused``: the members' :meth:`fused_members` (made here without).
+        ``evidence``: the lines' evidence (:func:`~stickslip.estimators.evidence.
+        line_evidence`), where already read.
         """
         # batch norm folded, and chunks small enough for the activations to stay in
         # cache: about 5x faster on a CPU than one big batch
@@ -484,7 +488,7 @@ class LineEnsemble:
         if scale.ndim == 2:
             cls = self.line_classes(X, C)
             scale, exponent = scale[cls], exponent[cls]
-        return means.mean(axis=0), scale * sd**exponent * self.evidence_factor(X)
+        return means.mean(axis=0), scale * sd**exponent * self.evidence_factor(X, evidence)
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""
@@ -514,14 +518,19 @@ class LinePrediction:
     F_model_std: np.ndarray | None = None
     #: what each member's head read for each line, (members, N, D), when asked for
     features: np.ndarray | None = None
+    #: what each mapped line shows of visible effects, (N, len(EVIDENCE))
+    #: (:func:`~stickslip.estimators.evidence.line_evidence`)
+    evidence: np.ndarray | None = None
 
 
 def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
-                      batch: int = 2048, features: np.ndarray | None = None
+                      batch: int = 2048, features: np.ndarray | None = None,
+                      evidence: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Standardised predictive mean and std (N, n_targets) of mapped lines, each read
     whole: lines of equal length are batched together. ``features``: an array (members,
-    N, D) to fill with the head's inputs (:meth:`LineEnsemble.predict_std`)."""
+    N, D) to fill with the head's inputs (:meth:`LineEnsemble.predict_std`);
+    ``evidence``: the lines' evidence (N, k), where already read."""
     n = len(lines)
     mu = np.empty((n, len(TARGETS)))
     sd = np.empty((n, len(TARGETS)))
@@ -534,7 +543,8 @@ def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Te
             X = line_inputs([lines[i] for i in sel], ens.spec)
             part = None if features is None else np.empty(
                 (features.shape[0], sel.size, features.shape[2]), features.dtype)  # fmt: skip
-            mu[sel], sd[sel] = ens.predict_std(X, cond[sel], part, fused)
+            e = None if evidence is None else evidence[sel]
+            mu[sel], sd[sel] = ens.predict_std(X, cond[sel], part, fused, e)
             if features is not None:
                 features[:, sel] = part
     return mu, sd
@@ -567,12 +577,14 @@ def predict_lines(
     feats = np.empty((len(ens.members), n, ens.members[0].n_features), np.float32) \
         if features else None
     cond = conditioning(a, v, ens.spec, temperature_K)
-    mu, sd = predict_std_lines(ens, lines, cond, batch, feats)
+    # read once: the calibration's width factor and the rows' evidence columns
+    evidence = line_evidence(lines, ens.spec.lattice_nm / ens.spec.pixel_nm)
+    mu, sd = predict_std_lines(ens, lines, cond, batch, feats, evidence)
     mu, sd = mu * ens.y_std + ens.y_mean, sd * ens.y_std
     s = a / ens.spec.lattice_nm
     shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
     z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
-    out = LinePrediction({}, {}, {}, {}, {}, {}, features=feats)
+    out = LinePrediction({}, {}, {}, {}, {}, {}, features=feats, evidence=evidence)
     for j, name in enumerate(("F_mean_nN", "U0_eV", "K_N_m", "eta")):
         m, h68, h95 = mu[:, j], z68[j] * sd[:, j], z95[j] * sd[:, j]
         e = h68 / Z68  # std of the Gaussian with this 68 % interval

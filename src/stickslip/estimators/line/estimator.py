@@ -19,6 +19,7 @@ from stickslip.estimators.classical.estimator import (
     estimate_array,
 )
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
+from stickslip.estimators.evidence import EVIDENCE_COLUMNS
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
@@ -63,7 +64,9 @@ class LineEstimator(TraceEstimator):
     """The default estimator: a whole-line CNN ensemble with calibrated intervals.
 
     Per trace: ``F_mean_nN, U0_eV, K_N_m, eta``, ``*_std`` (the std of the Gaussian, or
-    log-normal, with the same 68 % interval) and the central 68 % / 95 % intervals. The
+    log-normal, with the same 68 % interval), the central 68 % / 95 % intervals, and what
+    the line shows of visible effects (:data:`EVIDENCE_COLUMNS`, read by the per-map
+    pooling to find lines unlike the rest of their map). The
     lattice and the velocity of each trace enter the mapping and the network's
     conditioning; the temperature is the model's (a note says when traces differ).
     """
@@ -129,6 +132,7 @@ class LineEstimator(TraceEstimator):
                 row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
+            row.update(zip(EVIDENCE_COLUMNS, map(float, pred.evidence[j]), strict=True))
             out[i] = row
         if self.domain_verdict:
             self._check_stick_slip(traces, conditions, out)
