@@ -87,7 +87,7 @@ class FamilyCalibration:
     seed: int = 5101
     draws: int = 4
     implementation: str = "train"
-    training_draws: int = 0
+    training_draws: int = 4
     offset: OffsetPrior | None = dataclasses.field(
         default_factory=lambda: OffsetPrior.from_family(fx.Crosstalk())
     )
