@@ -7,10 +7,10 @@ must stay; others show (a slow drift or a crosstalk curve, a modulated substrate
 pickup, a telegraph step, spikes), and a line that shows none of them should not pay for
 them. The line model's calibration therefore scales each line's std by
 ``exp(b0 + b . e)`` (:func:`stickslip.estimators.line.training.calibrate`), where ``e``
-is the evidence below, ``b >= 0``, and ``b0`` (negative) is what a line without
-evidence saves; the fit is a 95 % quantile regression, the interval score's own
-criterion (Gneiting and Raftery 2007), so the coefficients are those of the sharpest
-intervals that still cover.
+is the evidence below and ``b >= 0``, so a line without evidence gets the least width
+(``b0`` sets the level; the intervals' shape, fitted after it, rescales it); the fit is
+a 95 % quantile regression, the interval score's own criterion (Gneiting and Raftery
+2007), so the coefficients are those of the sharpest intervals that still cover.
 
 The evidence, per mapped line (on the model's reference lattice and pixel):
 
