@@ -66,9 +66,10 @@ class LineEstimator(TraceEstimator):
     Per trace: ``F_mean_nN, U0_eV, K_N_m, eta``, ``*_std`` (the std of the Gaussian, or
     log-normal, with the same 68 % interval), the central 68 % / 95 % intervals, and what
     the line shows of visible effects (:data:`EVIDENCE_COLUMNS`, read by the per-map
-    pooling to find lines unlike the rest of their map). The
-    lattice and the velocity of each trace enter the mapping and the network's
-    conditioning; the temperature is the model's (a note says when traces differ).
+    pooling to find lines unlike the rest of their map). The lattice and the velocity of
+    each trace enter the mapping and the network's conditioning, and so does its
+    temperature for a model trained over a range of them (a note says when a trace's
+    temperature lies outside what the model was trained at).
     """
 
     kind = "line"
