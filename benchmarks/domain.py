@@ -194,18 +194,13 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
     more, as training's pristine lines."""
     from stickslip.estimators.line.training import TYPICAL_FRACTION, training_effects
     from stickslip.jobs.train import BundledRecipe
-    from stickslip.simulators.randomised import (
-        RandomisedConfig,
-        cached_randomised_set,
-        lab_config,
-        with_dynamics,
-    )
+    from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
 
     n, seed = REFERENCE_SIZES, REFERENCE_SEEDS
     configs = [RandomisedConfig(n=n["randomised"], seed=seed["randomised"]),
                lab_config(n["lab"], seed["lab"])]  # fmt: skip
-    if BundledRecipe().dynamics:  # the training prior's dynamics and acquisition
-        configs = [with_dynamics(c) for c in configs]
+    # the training prior's dynamics and acquisition
+    configs = [BundledRecipe().prior(c) for c in configs]
     parts = []
     for config in configs:
         data = cached_randomised_set(config, work, progress=False)

@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from acquisition import Draw, cached_set, score_set, set_specs  # noqa: E402
 
+from stickslip.estimators.line.ensemble import LineSpec  # noqa: E402
 from stickslip.estimators.line.estimator import LineEstimator  # noqa: E402
 from stickslip.estimators.line.training import (  # noqa: E402
     TYPICAL_FRACTION,
@@ -53,11 +54,7 @@ LOW_THIRD = 0.1 * 100.0 ** (1.0 / 3.0)
 def train_small(force: ArrayRows, x_nm: np.ndarray, params: dict, cfg: LineTrainConfig,
                 expert) -> LineEstimator:  # fmt: skip
     """A line model trained and calibrated on these rows (spec as the bundled model's)."""
-    from stickslip.estimators.line.ensemble import LineSpec
-
-    T = params["temperature_K"]
-    spec = LineSpec(condition_temperature=True,
-                    temperature_range_K=(float(T.min()), float(T.max())))  # fmt: skip
+    spec = LineSpec.for_temperatures(params["temperature_K"])
     ens, _ = train_line_ensemble(force, x_nm, params, cfg, spec=spec, progress=False,
                                  expert=expert)  # fmt: skip
     return LineEstimator(ens, "ablation")

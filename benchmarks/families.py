@@ -92,11 +92,7 @@ from stickslip.simulators.bench import (
     in_eta_window,
 )
 from stickslip.simulators.instrument import LAB
-from stickslip.simulators.randomised import (
-    RandomisedConfig,
-    cached_randomised_set,
-    with_dynamics,
-)
+from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
 from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -236,7 +232,7 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}; torch threads {args.threads}")  # fmt: skip
     # the pools follow the training prior: its dynamics and acquisition where it has them
-    pool = with_dynamics if BundledRecipe().dynamics else (lambda c: c)
+    pool = BundledRecipe().prior
     cal_pool = cached_randomised_set(pool(RandomisedConfig(n=args.n_cal, seed=CAL_SEED)),
                                      args.work)  # fmt: skip
     eval_pool = cached_randomised_set(pool(RandomisedConfig(n=args.n_eval, seed=args.eval_seed)),

@@ -12,11 +12,8 @@ from __future__ import annotations
 
 import importlib.util
 import io
-import signal
 import sys
 import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import h5py
@@ -93,20 +90,6 @@ def _seeds() -> dict[str, bytes]:
 SEEDS = _seeds()
 
 
-@contextmanager
-def watchdog(seconds: int) -> Iterator[None]:
-    def _fire(signum, frame):  # pragma: no cover - only on a hang
-        raise TimeoutError(f"reader hung for more than {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, _fire)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
-
-
 @st.composite
 def mutated(draw) -> tuple[str, bytes]:
     suffix = draw(st.sampled_from(SUFFIXES))
@@ -134,7 +117,7 @@ def _check(files: list[tuple[str, bytes]]) -> None:
             p = Path(d) / f"f{k}{suffix}"
             p.write_bytes(content)
             paths.append(p)
-        with watchdog(WATCHDOG_S):
+        with FUZZ.watchdog(WATCHDOG_S):
             traces, errors = collect_traces(paths)
         assert all(isinstance(t, Trace) for t in traces)
         for e in errors:

@@ -90,6 +90,12 @@ class BundledRecipe:
     #: stay at the preset
     dynamics: bool = True
 
+    def prior(self, config: RandomisedConfig) -> RandomisedConfig:
+        """``config`` with the recipe's dynamics and acquisition (where it has them): what
+        sets meant to look like the training lines (calibration pools, the domain
+        reference) are drawn from."""
+        return with_dynamics(config) if self.dynamics else config
+
 
 @dataclass
 class TrainingData:
@@ -254,9 +260,7 @@ def bundled_line_data(work: str | os.PathLike, recipe: BundledRecipe = BundledRe
     configs = [RandomisedConfig(n=recipe.n, seed=s) for s in recipe.seeds]
     if recipe.typical:
         configs.append(lab_config(recipe.typical, recipe.typical_seed))
-    if recipe.dynamics:
-        configs = [with_dynamics(c) for c in configs]
-    sets = [cached_randomised_set(c, work, progress, lazy=True) for c in configs]
+    sets = [cached_randomised_set(recipe.prior(c), work, progress, lazy=True) for c in configs]
     columns = sorted(sets[0].params)
     if recipe.paper:
         ds = open_dataset(sweep_if_missing(work / f"paper_{recipe.paper}_{recipe.paper_seed}.h5",
@@ -301,11 +305,7 @@ def train_line(training: TrainingData, out: str | os.PathLike, config: LineTrain
     if expert is not None:
         card["expert"] = {"model": expert_name, "dataset_fingerprint": expert.dataset_fingerprint}
     # a set recorded over a range of temperatures trains a model that reads the temperature
-    T = d.params.get("temperature_K")
-    spec = LineSpec()
-    if T is not None and float(np.ptp(T)) > 1.0:
-        spec = LineSpec(condition_temperature=True,
-                        temperature_range_K=(float(np.min(T)), float(np.max(T))))
+    spec = LineSpec.for_temperatures(d.params.get("temperature_K"))
     ens, report = train_line_ensemble(d.force_nN, d.x_nm, d.params, config, spec=spec,
                                       progress=progress, expert=expert,
                                       stream=stream)  # fmt: skip

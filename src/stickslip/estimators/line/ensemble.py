@@ -92,6 +92,19 @@ class LineSpec:
             object.__setattr__(self, "temperature_range_K",
                                tuple(float(t) for t in self.temperature_range_K))  # fmt: skip
 
+    @classmethod
+    def for_temperatures(cls, temperature_K: np.ndarray | None) -> LineSpec:
+        """The spec of a model trained on lines at these temperatures: one that reads the
+        temperature where they span more than :data:`TEMPERATURE_TOLERANCE_K`, else the
+        default (the reference temperature)."""
+        if temperature_K is None:
+            return cls()
+        T = np.asarray(temperature_K, float)
+        if float(np.ptp(T)) <= TEMPERATURE_TOLERANCE_K:
+            return cls()
+        return cls(condition_temperature=True,
+                   temperature_range_K=(float(T.min()), float(T.max())))  # fmt: skip
+
     def trained_at(self, temperature_K: float) -> bool:
         """Whether the model was trained at (or over a range that holds) this temperature."""
         lo, hi = self.temperature_range_K or (self.temperature_K, self.temperature_K)
