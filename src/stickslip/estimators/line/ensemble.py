@@ -417,14 +417,11 @@ class LineEnsemble:
     #: clipped (no extrapolation beyond what the fit saw)
     evidence_range: np.ndarray | None = None
 
-    def evidence_factor(self, X: torch.Tensor, e: np.ndarray | None = None) -> np.ndarray:
-        """The factor on each input line's calibrated std, (B, n_targets) (1 without);
-        ``e``: the lines' evidence where already read (else read off ``X``)."""
+    def evidence_factor(self, e: np.ndarray) -> np.ndarray:
+        """The factor on the calibrated std of lines with evidence ``e`` (B, len(EVIDENCE)),
+        (B, n_targets) (1 without an evidence calibration)."""
         if self.evidence is None:
-            return np.ones((X.shape[0], len(TARGETS)))
-        if e is None:
-            e = line_evidence_batch(input_force_nN(X, self.spec),
-                                    self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
+            return np.ones((e.shape[0], len(TARGETS)))
         if self.evidence_range is not None:
             e = np.clip(e, self.evidence_range[0], self.evidence_range[1])
         b = np.asarray(self.evidence, float)
@@ -501,7 +498,11 @@ class LineEnsemble:
         if scale.ndim == 2:
             cls = self.line_classes(X, C)
             scale, exponent = scale[cls], exponent[cls]
-        return means.mean(axis=0), scale * sd**exponent * self.evidence_factor(X, evidence)
+        if self.evidence is not None and evidence is None:
+            evidence = line_evidence_batch(input_force_nN(X, self.spec),
+                                           self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
+        factor = 1.0 if self.evidence is None else self.evidence_factor(evidence)
+        return means.mean(axis=0), scale * sd**exponent * factor
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""

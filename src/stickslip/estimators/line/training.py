@@ -579,7 +579,7 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
         ens.evidence_range = np.array([e.min(axis=0), e.max(axis=0)])
         r = np.log(err + 1e-12) - np.log(std)
         ens.evidence = np.array([evidence_fit(r[:, j], e, w) for j in range(err.shape[1])])
-        std = std * np.exp(ens.evidence[:, 0][None, :] + e @ ens.evidence[:, 1:].T)
+        std = std * ens.evidence_factor(e)
     z_cal = err / std
     ens.shape = np.array([_weighted_quantile(z_cal[:, j], w, SHAPE_LEVELS)
                           for j in range(z_cal.shape[1])])  # fmt: skip
