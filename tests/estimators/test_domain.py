@@ -382,3 +382,23 @@ def test_a_line_that_changes_part_way_is_out_of_domain_with_where():
     plain = judge(sawtooth())
     assert plain["in_domain"] is True and plain["change_nm"] is None
 
+
+
+@pytest.mark.parametrize("change_nm", [3.0, 7.5])
+def test_a_change_off_the_middle_is_located_where_it_is(change_nm):
+    # the levels' clipping once drew every change towards the line's middle
+    r = judge(tip_change_sawtooth(change_nm))
+    assert r["in_domain"] is False
+    assert r["change_nm"] == pytest.approx(change_nm, abs=0.5)
+
+
+def test_a_step_of_the_force_level_is_a_change_and_a_smooth_drift_is_not():
+    # a barrier that grows 1.5x at high eta moves the peaks and valleys, not the drops
+    base = sawtooth()
+    step = judge(base + np.where(X < 7.0, 0.0, 0.8))
+    assert step["in_domain"] is False
+    assert step["change_nm"] == pytest.approx(7.0, abs=0.5)
+    # a drift that moves the level by as much, smoothly (a parabola), is no regime
+    u = X / X[-1]
+    drift = judge(base + 0.8 * (3.0 * u**2 - 2.0 * u**3))
+    assert drift["change_nm"] is None, drift["domain_reason"]

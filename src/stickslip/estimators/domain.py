@@ -38,9 +38,10 @@ and the row's estimate, so they hold for every estimator:
    :data:`UNEQUAL_DROPS` of their median), ``"several unequal slips per lattice period:
    more than one contact"``;
 4. change: the line is one regime: no change of level, part-way along it, in its
-   slips' log drops or its sticks' log rise rates
+   slips' log drops, its sticks' log rise rates or its peaks' level
    (:func:`~stickslip.estimators.segmentation.cycle_change`: a likelihood ratio over
-   its price, at least a fifth of the cycles on each side and a 10 % step) --
+   its price, at least a fifth of the cycles on each side, a 10 % step, and a step
+   that beats any slow trend of degree 1-3 by the BIC) --
    ``"the line changes part-way (at x = ... nm): two regimes"``;
 5. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
    the estimate's own uncertainty (the window is missed when the whole 95 % interval,

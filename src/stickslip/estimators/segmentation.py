@@ -78,8 +78,8 @@ PARAMS_PER_SEGMENT = 3.0
 
 # columns of the cycle table returned by `find_cycles`
 (CY_LO, CY_HI, CY_SLOPE_LO, CY_SLOPE_HI, CY_PEAK, CY_VALLEY, CY_DROP, CY_R_DOWN,
- CY_R_UP, CY_RATE) = range(10)  # fmt: skip
-N_CY_COLS = 10
+ CY_R_UP, CY_RATE, CY_TOP) = range(11)  # fmt: skip
+N_CY_COLS = 11
 #: A change of level along a series of per-cycle values counts where its likelihood
 #: ratio exceeds this many ln(n). White series of 20-300 values pass 15 ln(n) far less
 #: than 1 % of the time; lab-like lines (gain drift, telegraph steps, detector effects:
@@ -89,6 +89,9 @@ CHANGE_PENALTY = 15.0
 #: ... and where the two levels differ by at least this much (in the log of a per-cycle
 #: quantity: 10 %, far below the 1.3x of a tip change worth reporting)
 MIN_LEVEL_CHANGE = 0.1
+#: Highest degree of the slow trend a change of level must beat (by the BIC): drift
+#: and gain bend the cycles' peaks smoothly along a line, a tip change steps them.
+TREND_DEGREE = 3
 
 
 @njit(cache=True, error_model="numpy")
@@ -479,7 +482,8 @@ def find_cycles(F: np.ndarray, white: float = -1.0) -> tuple[np.ndarray, int, fl
     cycles : ndarray (m + 1, N_CY_COLS)
         One row per stick that ends in a slip (``m`` slips): the stick's samples
         ``CY_LO..CY_HI``, its straight part ``CY_SLOPE_LO..CY_SLOPE_HI``, the slip's
-        peak and valley samples, the drop, and the cycle's ``R_down`` and ``R_up``; then
+        peak and valley samples, the drop, the cycle's ``R_down`` and ``R_up``, its mean rise
+        rate and its peak's level (``CY_TOP``, on the fitted polyline); then
         the line's final stick (no slip after it: ``CY_PEAK`` -1).
     block : int
         Samples per block of the segmentation.
@@ -543,6 +547,7 @@ def find_cycles(F: np.ndarray, white: float = -1.0) -> tuple[np.ndarray, int, fl
         out[m, CY_PEAK] = vi[p]
         out[m, CY_VALLEY] = vi[nxt]
         out[m, CY_DROP] = fall
+        out[m, CY_TOP] = vv[p]
         if rise_len > 0:
             out[m, CY_RATE] = rise / rise_len
         # mean rates; a slip inside a sample interval is averaged over two of them,
@@ -654,36 +659,22 @@ def baseline(x: np.ndarray, F: np.ndarray, cycles: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
-    """The likelihood ratio of a single change of level before each index of a series
-    (per-cycle values in order; NaN where not tried), and the series' score.
-
-    The noise of one value is the robust scatter of the series' first differences over
-    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
-    about the two levels of the best split (a slow trend is smooth from value to value
-    but no step); the ratio is ``(mean_1 - mean_2)^2 / (s^2 (1/k + 1/(n - k)))``. The
-    score is the best split's ratio over its price ``CHANGE_PENALTY ln n``: above 1, the
-    series has two levels (with at least a fifth of the values on each side, values
-    clipped at 4 s from their half's median, a step of at least
-    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by the
-    BIC price of the step's place); 0 for fewer than eight values.
-    """
-    n = v.size
-    T = np.full(n, np.nan)
-    if n < 8:
-        return T, 0.0
-    d = v[1:] - v[:-1]
-    s = mad_sigma(d) / np.sqrt(2.0)
-    if not s > 0:
-        return T, 0.0
-    # one odd cycle (a missed slip) is not a regime: values clipped at 4 s from the
-    # median of their own half of the line
+def _clip_levels(v: np.ndarray, k: int, s: float) -> np.ndarray:
+    """``v`` with ``v[:k]`` and ``v[k:]`` each clipped at 4 ``s`` from its own median."""
     w = v.copy()
-    h = n // 2
-    for a, b in ((0, h), (h, n)):
+    for a, b in ((0, k), (k, v.size)):
         med = median(v[a:b])
         for i in range(a, b):
             w[i] = min(max(v[i], med - 4.0 * s), med + 4.0 * s)
+    return w
+
+
+@njit(cache=True, error_model="numpy")
+def _split_ratios(w: np.ndarray, s: float) -> tuple[np.ndarray, int]:
+    """The likelihood ratio of one change of level before each index of ``w`` (NaN
+    where not tried: a fifth of the values on each side at least) and its argmax."""
+    n = w.size
+    T = np.full(n, np.nan)
     total = np.sum(w)
     left = w[0] + w[1]
     best = 0.0
@@ -699,6 +690,46 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
         if T[k] > best:
             best = T[k]
             arg = k
+    return T, arg
+
+
+@njit(cache=True, error_model="numpy")
+def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
+    """The likelihood ratio of a single change of level before each index of a series
+    (per-cycle values in order; NaN where not tried), and the series' score.
+
+    The noise of one value is the robust scatter of the series' first differences over
+    sqrt(2) (a step moves one difference only), or, where larger, the robust scatter
+    about the two levels of the best split (a slow trend is smooth from value to value
+    but no step); the ratio is ``(mean_1 - mean_2)^2 / (s^2 (1/k + 1/(n - k)))``. The
+    score is the best split's ratio over its price ``CHANGE_PENALTY ln n``: above 1, the
+    series has two levels (with at least a fifth of the values on each side, values
+    clipped at 4 s from the median of their own level, a step of at least
+    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by the
+    BIC price of the step's place); 0 for fewer than eight values.
+    """
+    n = v.size
+    T = np.full(n, np.nan)
+    if n < 8:
+        return T, 0.0
+    d = v[1:] - v[:-1]
+    s = mad_sigma(d) / np.sqrt(2.0)
+    if not s > 0:
+        return T, 0.0
+    # one odd cycle (a missed slip, the cycle in which the tip changed) is not a
+    # regime: values are clipped at 4 s from the median of their own level. The levels
+    # are the best split's, first of the values as they are, then found again after
+    # each clipping until the split stays put (clipping about the line's two halves
+    # instead drew every split to the middle)
+    w = v
+    T, arg = _split_ratios(w, s)
+    k = -1
+    for _ in range(8):
+        if arg < 0 or arg == k:
+            break
+        k = arg
+        w = _clip_levels(v, k, s)
+        T, arg = _split_ratios(w, s)
     if arg < 0:
         return T, 0.0
     # judged against the scatter about the two levels, not only between neighbours: a
@@ -711,24 +742,31 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     T *= (s / max(s, mad_sigma(res))) ** 2
     if abs(m1 - m2) < MIN_LEVEL_CHANGE:
         return T, 0.0
-    # a step, not a slope: two levels must explain the series better than a straight
-    # line through it by the BIC price of the step's place
-    idx = np.arange(n) - 0.5 * (n - 1)
-    slope = np.sum(idx * (w - np.mean(w))) / np.sum(idx * idx)
-    rss_line = np.sum((w - np.mean(w) - slope * idx) ** 2)
+    # a step, not a drift: two levels and a place must explain the series better, by
+    # the BIC, than a slow trend (a polynomial of degree 1 to TREND_DEGREE) through it
     mu1 = np.mean(w[:arg])
     mu2 = np.mean(w[arg:])
-    rss_step = np.sum((w[:arg] - mu1) ** 2) + np.sum((w[arg:] - mu2) ** 2)
-    if not n * np.log(rss_line / max(rss_step, 1e-300)) > np.log(n):
-        return T, 0.0
+    rss_step = max(np.sum((w[:arg] - mu1) ** 2) + np.sum((w[arg:] - mu2) ** 2), 1e-300)
+    u = (np.arange(n) - 0.5 * (n - 1)) / (0.5 * n)
+    for deg in range(1, TREND_DEGREE + 1):
+        A = np.empty((n, deg + 1))
+        for j in range(deg + 1):
+            A[:, j] = u**j
+        c = np.linalg.lstsq(A, w)[0]
+        rss_trend = np.sum((w - A @ c) ** 2)
+        if not n * np.log(rss_trend / rss_step) > (2 - deg) * np.log(n):
+            return T, 0.0
     return T, np.nanmax(T) / (CHANGE_PENALTY * np.log(n))
 
 
 @njit(cache=True, error_model="numpy")
 def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
-    """Two regimes along a line: the strongest change of level in its cycles' log drops
-    and log rise rates (:func:`_change_profile` each), placed where the likelihood ratios
-    of the series that show a change add up to most.
+    """Two regimes along a line: the strongest change of level in its cycles' log drops,
+    log rise rates and peak levels (in median drops; :func:`_change_profile` each),
+    placed where the likelihood ratios of the series that show a change add up to most.
+    A barrier that changes at high eta moves the peaks and valleys alike, not the drops
+    (about ``K a`` there); drift and gain move the peaks too, but smoothly, which the
+    profile's trend test tells from a step.
 
     Returns
     -------
@@ -742,11 +780,18 @@ def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
         return -1, 0.0
     total = np.zeros(m - 1)
     best = 0.0
-    for col in (CY_DROP, CY_RATE):  # not the peaks: a drift or a modulated barrier
-        v = cycles[1:m, col]  # moves them (the first stick starts where the line does)
-        if not np.all(v > 0):
-            continue
-        T, score = _change_profile(np.log(v))
+    drop = median(cycles[1:m, CY_DROP])
+    for col in (CY_DROP, CY_RATE, CY_TOP):  # the first stick starts where the line does
+        v = cycles[1:m, col]
+        if col == CY_TOP:
+            if not drop > 0:
+                continue
+            v = v / drop  # the peaks' level in drops
+        else:
+            if not np.all(v > 0):
+                continue
+            v = np.log(v)
+        T, score = _change_profile(v)
         if score > 1.0:
             for i in range(T.size):
                 if T[i] > 0:
