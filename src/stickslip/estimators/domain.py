@@ -38,10 +38,11 @@ and the row's estimate, so they hold for every estimator:
    :data:`UNEQUAL_DROPS` of their median), ``"several unequal slips per lattice period:
    more than one contact"``;
 4. change: the line is one regime: no change of level, part-way along it, in its
-   slips' log drops, its sticks' log rise rates or its peaks' level
+   sticks' log rise rates or its peaks' level
    (:func:`~stickslip.estimators.segmentation.cycle_change`: a likelihood ratio over
    its price, at least a fifth of the cycles on each side, a 10 % step, and a step
-   that beats any slow trend of degree 1-3 by the BIC) --
+   that beats by the BIC any slow trend of degree 1-3 and any ramp over three cycles
+   or more) --
    ``"the line changes part-way (at x = ... nm): two regimes"``;
 5. eta: the estimate's eta inside the trained window :data:`ETA_WINDOW`, judged on
    the estimate's own uncertainty (the window is missed when the whole 95 % interval,
@@ -182,7 +183,7 @@ def _check_one(x: np.ndarray, F: np.ndarray, out: np.ndarray) -> None:
         out[SPACING_MEDIAN] = median(gaps)
         out[SPACING_Q25] = percentile(gaps, 25.0)
     # two regimes along the line (a tip that changes): a change of level in the
-    # cycles' drops, rise rates or peaks
+    # cycles' rise rates or peaks
     out[CHANGE] = 0.0
     if m >= 8:
         drops = cycles[:m, sg.CY_DROP]

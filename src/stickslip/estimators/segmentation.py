@@ -694,6 +694,40 @@ def _split_ratios(w: np.ndarray, s: float) -> tuple[np.ndarray, int]:
 
 
 @njit(cache=True, error_model="numpy")
+def _level_rss(v: np.ndarray, k: int) -> float:
+    """Residual sum of squares of ``v`` about the means of ``v[:k]`` and ``v[k:]``."""
+    return np.sum((v[:k] - np.mean(v[:k])) ** 2) + np.sum((v[k:] - np.mean(v[k:])) ** 2)
+
+
+@njit(cache=True, error_model="numpy")
+def _ramp_rss(v: np.ndarray, k: int) -> float:
+    """The least residual sum of squares of ``v`` about two levels joined by a straight
+    ramp of ``w >= 3`` values centred on ``k`` (both levels fitted for each ``w``)."""
+    n = v.size
+    best = np.inf
+    for w in range(3, n):
+        a = k - w / 2.0  # the ramp runs from a to a + w
+        if a < 1.0 or a + w > n - 1.0:
+            break
+        r = np.empty(n)
+        for i in range(n):
+            r[i] = min(max((i + 0.5 - a) / w, 0.0), 1.0)
+        # least squares for v ~ m1 (1 - r) + m2 r
+        s00 = np.sum((1.0 - r) ** 2)
+        s01 = np.sum((1.0 - r) * r)
+        s11 = np.sum(r * r)
+        b0 = np.sum((1.0 - r) * v)
+        b1 = np.sum(r * v)
+        det = s00 * s11 - s01 * s01
+        if not det > 0:
+            continue
+        m1 = (b0 * s11 - b1 * s01) / det
+        m2 = (s00 * b1 - s01 * b0) / det
+        best = min(best, np.sum((v - m1 * (1.0 - r) - m2 * r) ** 2))
+    return best
+
+
+@njit(cache=True, error_model="numpy")
 def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     """The likelihood ratio of a single change of level before each index of a series
     (per-cycle values in order; NaN where not tried), and the series' score.
@@ -756,17 +790,25 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
         rss_trend = np.sum((w - A @ c) ** 2)
         if not n * np.log(rss_trend / rss_step) > (2 - deg) * np.log(n):
             return T, 0.0
+    # a step, not a slope between two levels: the values as they are must not fit
+    # better, by the BIC price of one more parameter, with the levels joined by a ramp
+    # of three cycles or more (a barrier modulated along the substrate) than by a step
+    # (a tip change moves within one cycle: the one in which it happens)
+    if _ramp_rss(v, arg) * np.exp(np.log(n) / n) < _level_rss(v, arg):
+        return T, 0.0
     return T, np.nanmax(T) / (CHANGE_PENALTY * np.log(n))
 
 
 @njit(cache=True, error_model="numpy")
 def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
-    """Two regimes along a line: the strongest change of level in its cycles' log drops,
-    log rise rates and peak levels (in median drops; :func:`_change_profile` each),
-    placed where the likelihood ratios of the series that show a change add up to most.
-    A barrier that changes at high eta moves the peaks and valleys alike, not the drops
-    (about ``K a`` there); drift and gain move the peaks too, but smoothly, which the
-    profile's trend test tells from a step.
+    """Two regimes along a line: the strongest change of level in its cycles' log rise
+    rates (the stick's stiffness) and peak levels (in median drops: the barrier;
+    :func:`_change_profile` each), placed where the likelihood ratios of the series
+    that show a change add up to most. A barrier that changes at high eta moves the
+    peaks and valleys alike, not the drops (about ``K a`` there); drift, gain and a
+    barrier modulated along the substrate move the peaks too, but smoothly, which the
+    profile's trend and ramp tests tell from a step. The drops are left out: a line
+    that mixes single and multiple slips has drops of several sizes in any order.
 
     Returns
     -------
@@ -781,16 +823,16 @@ def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
     total = np.zeros(m - 1)
     best = 0.0
     drop = median(cycles[1:m, CY_DROP])
-    for col in (CY_DROP, CY_RATE, CY_TOP):  # the first stick starts where the line does
+    for col in (CY_RATE, CY_TOP):  # the first stick starts where the line does
         v = cycles[1:m, col]
         if col == CY_TOP:
             if not drop > 0:
                 continue
             v = v / drop  # the peaks' level in drops
-        else:
-            if not np.all(v > 0):
-                continue
+        elif np.all(v > 0):
             v = np.log(v)
+        else:
+            continue
         T, score = _change_profile(v)
         if score > 1.0:
             for i in range(T.size):
