@@ -34,8 +34,7 @@ import numpy as np
 
 from stickslip.estimators.load import load_estimator
 from stickslip.estimators.table import domain_verdict
-from stickslip.simulators.config import PhysicalSettings
-from stickslip.simulators.contacts import contact_set
+from stickslip.simulators.contacts import cached_contact_set
 from stickslip.traces.trace import Trace
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,21 +42,9 @@ CHANGE_RE = re.compile(r"at x = ([0-9.]+) nm")
 
 
 def cached_set(kind: str, n: int, seed: int, work: Path) -> dict[str, np.ndarray]:
-    """The set's lines and truths, simulated once into ``work``."""
-    path = work / f"{kind}_{n}_{seed}.npz"
-    if path.exists():
-        return dict(np.load(path, allow_pickle=False))
-    work.mkdir(parents=True, exist_ok=True)
-    s = contact_set(n, kind, seed, PhysicalSettings())
-    out = {"x_nm": np.asarray(s.x_nm, float), "force_nN": np.asarray(s.force_nN, float)}
-    for key, val in s.truth.items():
-        arr = np.asarray(val)
-        if arr.dtype.kind in "fiub":
-            out[f"truth_{key}"] = arr.astype(float)
-    part = path.with_name(path.name + ".partial.npz")
-    np.savez_compressed(part, **out)
-    os.replace(part, path)
-    return out
+    """The set's lines and truths (``truth_*``), simulated once into ``work``."""
+    x, F, truth = cached_contact_set(n, kind, seed, work)
+    return {"x_nm": x, "force_nN": F, **{f"truth_{k}": v for k, v in truth.items()}}
 
 
 def traces(data: dict[str, np.ndarray], kind: str) -> list[Trace]:

@@ -10,7 +10,11 @@ How the sets are made (independently of training and of each other):
   prior (:mod:`stickslip.simulators.effects`) with the ``"train"`` implementation of
   every family (seed 5101), each line's constant offset then drawn afresh from the
   documented offset prior (:func:`~stickslip.estimators.line.families.restate_offsets`,
-  in every calibration, leave-one-family-out included);
+  in every calibration, leave-one-family-out included); with ``--contacts N`` (default
+  :data:`BUNDLED_CONTACTS`), the multi-asperity lines of ``contact_set(320, "multi",
+  5111)``, ``contact_set(320, "multi", 5112)``, ... that one PT describes join the
+  calibration trajectories, their truth the effective PT
+  (:func:`~stickslip.estimators.line.families.contact_lines`);
 - evaluation sets, all with the ``"eval"`` implementations (other functional forms
   over the same documented ranges), one draw per evaluation trajectory: ``clean`` (no
   effect), ``all`` (every family at its documented probability, seed 6101) and, per
@@ -70,6 +74,7 @@ from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.families import (
     FamilyCalibration,
     calibrate_on_families,
+    contact_lines,
     draw_family_lines,
 )
 from stickslip.estimators.line.modelfile import (
@@ -98,6 +103,9 @@ from stickslip.traces.dataset import Dataset, dataset_traces, load_dataset
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = TARGETS  # <F>, U0, K, eta
 CAL_SEED, EVAL_SEED = 501, 601
+#: multi-asperity lines drawn for the bundled model's calibration (issue 40): those one
+#: PT describes join the calibration trajectories (FamilyCalibration.contacts)
+BUNDLED_CONTACTS = 640
 CAL_DRAW_SEED, ALL_SEED, WITH_SEED, PAIR_SEED = 5101, 6101, 6200, 6401
 
 
@@ -213,6 +221,9 @@ def main() -> None:
     ap.add_argument("--no-lofo", action="store_true", help="skip leave-one-family-out")
     ap.add_argument("--write", type=Path, default=None,
                     help="save the model calibrated on every family here")
+    ap.add_argument("--contacts", type=int, default=BUNDLED_CONTACTS,
+                    help="multi-asperity lines drawn for the calibration (those one PT "
+                         "describes kept; 0: none)")  # fmt: skip
     ap.add_argument("--n-bench", type=int, default=120,
                     help="lab-bench lines per material (0: no bench)")
     ap.add_argument("--threads", type=int, default=2)
@@ -237,6 +248,9 @@ def main() -> None:
                                      args.work)  # fmt: skip
     eval_pool = cached_randomised_set(pool(RandomisedConfig(n=args.n_eval, seed=args.eval_seed)),
                                       args.work)  # fmt: skip
+    contacts = None
+    if args.contacts:
+        contacts = contact_lines(FamilyCalibration(contacts=args.contacts), args.work)
     prior = fx.NuisancePrior()
     sets = {"clean": eval_pool,
             "all families": draw_family_lines(eval_pool, prior, all_seed).data}  # fmt: skip
@@ -260,8 +274,9 @@ def main() -> None:
     for label, ens in (("shipped", shipped), ("families", None)):
         if ens is None:
             ens = copy.deepcopy(shipped)
-            settings = FamilyCalibration(draws=args.draws, training_draws=args.training_draws)
-            report = calibrate_on_families(ens, cal_pool, settings)
+            settings = FamilyCalibration(draws=args.draws, training_draws=args.training_draws,
+                                         contacts=args.contacts)  # fmt: skip
+            report = calibrate_on_families(ens, cal_pool, settings, contacts)
             families_ens, families_report = ens, report
         if label == "families":
             # in-sample: the calibration lines ("train" implementations) that carry f
@@ -299,7 +314,8 @@ def main() -> None:
             ens = copy.deepcopy(shipped)
             calibrate_on_families(ens, cal_pool,
                                   FamilyCalibration(prior=prior.without(f), draws=args.draws,
-                                                    training_draws=args.training_draws))
+                                                    training_draws=args.training_draws,
+                                                    contacts=args.contacts), contacts)  # fmt: skip
             r = score(LineEstimator(ens, source), sets[f"with {f}"])
             summary["lofo"][f] = r
             print(line(f"with {f}", r), flush=True)

@@ -7,7 +7,9 @@ from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.contacts import (
     MISFIT_LIMIT,
     Contact,
+    cached_contact_set,
     contact_set,
+    described_dataset,
     fit_effective_pt,
     point_contact,
     pt_quasistatic_force,
@@ -219,6 +221,20 @@ def test_multi_contact_set():
     again = contact_set(3, "multi", seed=1, settings=SHORT, langevin=False)
     np.testing.assert_array_equal(again.force_T0_nN, cs.force_T0_nN)
     np.testing.assert_array_equal(again.force_nN, cs.force_T0_nN)
+
+
+def test_described_lines_as_a_dataset_and_cached(tmp_path):
+    x, F, t = cached_contact_set(6, "multi", 2, tmp_path)
+    assert (tmp_path / "multi_6_2.npz").exists()
+    x2, F2, _ = cached_contact_set(6, "multi", 2, tmp_path)  # read back, not simulated
+    np.testing.assert_array_equal(F2, F)
+    d = described_dataset(x, F, t)
+    keep = t["described"].astype(bool)
+    assert d.n == keep.sum() and d.force_nN.shape == (d.n, PAPER.pixels)
+    np.testing.assert_array_equal(d.params["K_N_m"], t["K_N_m"][keep])
+    np.testing.assert_allclose(d.params["F_mean_nN"], F[keep].mean(axis=1))
+    assert np.all(d.params["lattice_nm"] == PAPER.lattice_nm)
+    assert np.all(d.params["temperature_K"] == PAPER.temperature_K)
 
 
 @pytest.mark.slow  # compiles the project's PT kernel

@@ -694,6 +694,15 @@ def _split_ratios(w: np.ndarray, s: float) -> tuple[np.ndarray, int]:
 
 
 @njit(cache=True, error_model="numpy")
+def _zero_sigma(r: np.ndarray) -> float:
+    """Robust standard deviation of values whose centre is zero (differences of a
+    series, residuals about fitted levels): 1.4826 times their median absolute value.
+    Unlike the MAD about their own median it holds where they take two values in about
+    equal numbers (the differences of a series that alternates), where that MAD is 0."""
+    return 1.4826 * median(np.abs(r))
+
+
+@njit(cache=True, error_model="numpy")
 def _level_rss(v: np.ndarray, k: int) -> float:
     """Residual sum of squares of ``v`` about the means of ``v[:k]`` and ``v[k:]``."""
     return np.sum((v[:k] - np.mean(v[:k])) ** 2) + np.sum((v[k:] - np.mean(v[k:])) ** 2)
@@ -747,7 +756,7 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     if n < 8:
         return T, 0.0
     d = v[1:] - v[:-1]
-    s = mad_sigma(d) / np.sqrt(2.0)
+    s = _zero_sigma(d) / np.sqrt(2.0)
     if not s > 0:
         return T, 0.0
     # one odd cycle (a missed slip, the cycle in which the tip changed) is not a
@@ -773,7 +782,7 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     m2 = median(w[arg:])
     for i in range(n):
         res[i] = w[i] - (m1 if i < arg else m2)
-    T *= (s / max(s, mad_sigma(res))) ** 2
+    T *= (s / max(s, _zero_sigma(res))) ** 2
     if abs(m1 - m2) < MIN_LEVEL_CHANGE:
         return T, 0.0
     # a step, not a drift: two levels and a place must explain the series better, by
@@ -842,3 +851,41 @@ def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
     if best <= 1.0 or not np.any(total > 0):
         return -1, best
     return int(np.argmax(total)) + 1, best
+
+
+@njit(cache=True, error_model="numpy")
+def slope_change(cycles: np.ndarray) -> float:
+    """The score of a change of level part-way along a line in its sticks' log rise rates
+    (:func:`_change_profile`; above 1: sticks of two slopes, two springs in one line)."""
+    m = cycles.shape[0] - 1
+    if m < 9:
+        return 0.0
+    v = cycles[1:m, CY_RATE]
+    if not np.all(v > 0):
+        return 0.0
+    return _change_profile(np.log(v))[1]
+
+
+@njit(cache=True, error_model="numpy")
+def alternation(cycles: np.ndarray) -> float:
+    """The score of slips of two sizes taking turns: the likelihood ratio of two levels of
+    the log drops, one for the odd slips and one for the even, against one level, over
+    its price ``CHANGE_PENALTY ln n`` (above 1: two sizes alternate, as two contacts in
+    different registry make; the noise is the robust scatter of each kind about its own
+    median, and the two medians must differ by :data:`MIN_LEVEL_CHANGE`); 0 for fewer
+    than eight slips."""
+    m = cycles.shape[0] - 1
+    v = cycles[:m, CY_DROP]
+    n = v.size
+    if n < 8 or not np.all(v > 0):
+        return 0.0
+    v = np.log(v)
+    even, odd = v[0::2], v[1::2]
+    me, mo = median(even), median(odd)
+    if abs(me - mo) < MIN_LEVEL_CHANGE:
+        return 0.0
+    s = np.sqrt(0.5 * (_zero_sigma(even - me) ** 2 + _zero_sigma(odd - mo) ** 2))
+    if not s > 0:
+        s = 1e-12
+    T = (np.mean(even) - np.mean(odd)) ** 2 / (s * s * (1.0 / even.size + 1.0 / odd.size))
+    return T / (CHANGE_PENALTY * np.log(n))

@@ -100,8 +100,10 @@ PHYSICS.md (slip at ``F_slip``, into the next well).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -110,6 +112,7 @@ from scipy.optimize import least_squares
 from stickslip.simulators.config import PhysicalSettings, SettingsError, warmup_nm_for
 from stickslip.simulators.kernel import box_muller, sin_2pi, xoroshiro_pair
 from stickslip.simulators.lanes import rng_states, step_layout
+from stickslip.traces.dataset import Dataset
 from stickslip.units import (
     EV_TO_NN_NM,
     KB_NN_NM_PER_K,
@@ -1204,3 +1207,56 @@ def contact_set(
             truth["K_after_N_m"][i] = ln.after.series_N_m
     return ContactSet(x_nm=np.arange(s.pixels) * s.pixel_nm, force_nN=F, force_T0_nN=F0,
                       truth=truth, lines=lines)  # fmt: skip
+
+
+def described_dataset(x_nm: np.ndarray, force_nN: np.ndarray, truth: dict[str, np.ndarray],
+                      settings: PhysicalSettings | None = None) -> Dataset:  # fmt: skip
+    """The lines of a contact set (:func:`contact_set`: its ``x_nm``, ``force_nN`` and
+    ``truth``) that one effective PT describes, as a dataset whose params are their
+    truths, as a randomised set's are.
+
+    ``U0_eV``, ``K_N_m`` and ``eta`` are the effective fit (the task's truth),
+    ``F_mean_nN`` the line's mean force, and the recording's ``lattice_nm``,
+    ``velocity_nm_per_s``, ``temperature_K``, ``damping_per_s`` and ``mass_kg`` those of
+    ``settings`` (the set's own; default the paper preset). Lines no single PT
+    describes (misfit above :data:`MISFIT_LIMIT`) and tip changes are left out: they
+    have no one (U0, K) for an interval to hold.
+    """
+    s = settings or PhysicalSettings()
+    keep = np.flatnonzero(np.asarray(truth["described"], bool))
+    F = np.asarray(force_nN, float)[keep]
+    n = keep.size
+    params = {
+        "U0_eV": np.asarray(truth["U0_eV"], float)[keep],
+        "K_N_m": np.asarray(truth["K_N_m"], float)[keep],
+        "eta": np.asarray(truth["eta"], float)[keep],
+        "F_mean_nN": F.mean(axis=1),
+        "lattice_nm": np.full(n, s.lattice_nm),
+        "velocity_nm_per_s": np.full(n, s.velocity_nm_per_s),
+        "temperature_K": np.full(n, s.temperature_K),
+        "damping_per_s": np.full(n, s.damping_per_s),
+        "mass_kg": np.full(n, s.mass_kg),
+    }
+    return Dataset(F, np.asarray(x_nm, float), params, {"kind": "contacts-described", "n": n})
+
+
+def cached_contact_set(n: int, kind: str, seed: int, work: str | os.PathLike
+                       ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
+    """``(x_nm, force_nN, truth)`` of :func:`contact_set` ``(n, kind, seed)`` (paper preset),
+    simulated once into ``work/{kind}_{n}_{seed}.npz`` (written whole, then renamed) and
+    read from there after; the truth's numeric columns only."""
+    path = Path(work) / f"{kind}_{n}_{seed}.npz"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        cs = contact_set(n, kind, seed, PhysicalSettings())
+        out = {"x_nm": np.asarray(cs.x_nm, float), "force_nN": np.asarray(cs.force_nN, float)}
+        for key, val in cs.truth.items():
+            arr = np.asarray(val)
+            if arr.dtype.kind in "fiub":
+                out[f"truth_{key}"] = arr.astype(float)
+        part = path.with_name(path.name + ".partial.npz")
+        np.savez_compressed(part, **out)
+        os.replace(part, path)
+    with np.load(path, allow_pickle=False) as z:
+        truth = {k[len("truth_"):]: z[k] for k in z.files if k.startswith("truth_")}
+        return z["x_nm"], z["force_nN"], truth

@@ -142,6 +142,35 @@ def test_sticks_that_fit_no_one_spring_refuse_K():
         assert est.K_N_m_std <= E.MAX_K_SPREAD * est.K_N_m
 
 
+def test_sticks_of_two_slopes_part_way_refuse_K():
+    # a tip that stiffens 1.6x part-way: sticks of one slope, then of another
+    est = estimate_trace(*_sticks([5.0] * 14 + [8.0] * 16), lattice_nm=0.4, temperature_K=0)
+    assert est.quality == "two regimes" and est.regime == "stick-slip"
+    assert np.isnan(est.K_N_m)
+    # slopes that wander by a few per cent are one spring
+    est = estimate_trace(*_sticks(np.linspace(5.0, 5.3, 30)), lattice_nm=0.4, temperature_K=0)
+    assert est.quality == "ok"
+
+
+def test_slips_of_two_sizes_taking_turns_refuse_K():
+    # two contacts in different registry: a big and a small slip in turn, one slope
+    rng = np.random.default_rng(3)
+    spacing = np.tile([0.35, 0.15], 20)
+    slip_x = np.cumsum(spacing) + 0.1
+    slip_x = slip_x[slip_x < 7.5]
+    x, F = _sawtooth(slip_x, k=8.0, drops=8.0 * spacing[: slip_x.size], L=8.0)
+    F += rng.normal(0, 0.01, F.size)
+    est = estimate_trace(x, F, lattice_nm=0.5, temperature_K=0)
+    assert est.quality == "alternating slips" and np.isnan(est.K_N_m)
+    # slips of sizes in no order (single and double slips mixed) are answered
+    spacing = rng.choice([0.25, 0.5], size=40)
+    slip_x = np.cumsum(spacing) + 0.1
+    slip_x = slip_x[slip_x < 15.5]
+    x, F = _sawtooth(slip_x, k=8.0, drops=8.0 * spacing[: slip_x.size], L=16.0)
+    est = estimate_trace(x, F + rng.normal(0, 0.01, F.size), lattice_nm=0.25, temperature_K=0)
+    assert est.quality == "ok"
+
+
 @pytest.fixture
 def macro() -> tuple[np.ndarray, np.ndarray]:
     if not MACRO.is_file():

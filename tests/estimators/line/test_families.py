@@ -120,3 +120,20 @@ def test_calibration_on_families_refits_only_the_spread(clean):
         levels, factors = e.friction_factor
         np.testing.assert_allclose(levels, FRICTION_LEVELS)
         assert np.all((factors > 0.21) & (factors < 4.9)), factors
+
+
+def test_contact_lines_come_in_seeded_chunks_and_join_the_calibration(monkeypatch, tmp_path, clean):
+    import stickslip.estimators.line.families as fam
+
+    monkeypatch.setattr(fam, "CONTACT_CHUNK", 2)
+    settings = FamilyCalibration(contacts=3, contacts_seed=77, draws=1, training_draws=0)
+    lines = fam.contact_lines(settings, tmp_path)
+    assert sorted(p.name for p in tmp_path.glob("*.npz")) == ["multi_1_78.npz", "multi_2_77.npz"]
+    assert 1 <= lines.n <= 3  # those one PT describes
+    assert np.all(lines.params["lattice_nm"] == 0.246)
+    ens = copy.deepcopy(load_line_model(None))
+    report = calibrate_on_families(ens, clean, settings, lines)
+    fc = report["family_calibration"]
+    assert fc["contacts"] == 3 and fc["contacts_seed"] == 77
+    assert fc["n_contact_lines"] == lines.n
+    assert fc["n_trajectories"] == clean.n + lines.n

@@ -23,7 +23,9 @@ without sticking); ``not stick-slip`` (the force jumps up, as well as or instead
 down); ``too noisy`` (nothing stands out of the noise, or the noise is a large fraction
 of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak);
 ``sticks disagree`` (the sticks' own K's scatter by more than :data:`MAX_K_SPREAD` of
-the line's K: no one spring fits them). Every flag but ``ok`` comes without K.
+the line's K: no one spring fits them); ``two regimes`` (the sticks' slope changes
+part-way: a tip that changed); ``alternating slips`` (slips of two sizes take turns:
+more than one contact). Every flag but ``ok`` comes without K.
 """
 
 from __future__ import annotations
@@ -84,12 +86,22 @@ QUALITY = {
     4: "inconsistent slopes",
     5: "sticks disagree",
     6: "not stick-slip",
+    7: "two regimes",
+    8: "alternating slips",
 }
 #: The flag of a line whose slips are stick-slip but whose sticks fit no one spring: a
 #: refusal of K, not a sign that the line is not stick-slip.
 STICKS_DISAGREE = 5
 #: The flag of a line whose force jumps up (as well as, or instead of, down).
 NOT_STICK_SLIP = 6
+#: The flag of a line whose sticks change slope part-way (two springs: a tip that
+#: changed; :func:`~stickslip.estimators.segmentation.slope_change`).
+TWO_REGIMES = 7
+#: The flag of a line whose slips take turns at two sizes (two contacts in different
+#: registry; :func:`~stickslip.estimators.segmentation.alternation`).
+ALTERNATING = 8
+#: The flags of lines that are stick-slip but have no one spring: K refused.
+K_REFUSED = (STICKS_DISAGREE, TWO_REGIMES, ALTERNATING)
 REGIMES = ("single slip", "multiple slip", "stick-slip", "smooth", "not stick-slip")
 
 
@@ -152,6 +164,14 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, G: np.ndarray, segs: np.ndarray
     # a refusal carries no numbers: slopes between slips that noise may have made up
     if s_fit > NOISE_TO_DROP_MAX * median(cycles[:ns, sg.CY_DROP]):
         out[STATUS] = 3
+        return
+    # no one spring: sticks of two slopes (a tip that changed part-way), or slips of two
+    # sizes taking turns (two contacts); the median of either mixture is no K
+    if sg.slope_change(cycles) > 1.0:
+        out[STATUS] = TWO_REGIMES
+        return
+    if sg.alternation(cycles) > 1.0:
+        out[STATUS] = ALTERNATING
         return
     good = ~np.isnan(slp[:, sl.SLIP_F])
     drops = slp[:, sl.SLIP_F] - slp[:, sl.SLIP_F_AFTER]

@@ -13,9 +13,9 @@ from stickslip.conditions import Conditions
 from stickslip.estimators import domain
 from stickslip.estimators.base import TraceEstimator
 from stickslip.estimators.classical.estimator import (
+    K_REFUSED,
     QUALITY,
     STATUS,
-    STICKS_DISAGREE,
     estimate_array,
 )
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
@@ -164,5 +164,5 @@ class LineEstimator(TraceEstimator):
                                temperature_K=0.0)  # fmt: skip
         for i, status in zip(low, table[:, STATUS].astype(int), strict=True):
             # sticks that fit no one spring refuse K, but the slips are stick-slip
-            if QUALITY[status] != OK and status != STICKS_DISAGREE:
+            if QUALITY[status] != OK and status not in K_REFUSED:
                 rows[i]["stick_slip_check"] = QUALITY[status]  # type: ignore[index]

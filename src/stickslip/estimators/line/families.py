@@ -24,6 +24,7 @@ model (:func:`family_calibration_record`), so a calibrated file says how it was 
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,8 +43,12 @@ from stickslip.estimators.line.training import (
 )
 from stickslip.estimators.offsets import CompressionPrior, OffsetPrior, compression_moment
 from stickslip.simulators import effects as fx
+from stickslip.simulators.contacts import cached_contact_set, contact_set, described_dataset
 from stickslip.simulators.instrument import apply_instrument
-from stickslip.traces.dataset import Dataset
+from stickslip.traces.dataset import Dataset, concat_datasets
+
+#: Multi-asperity lines simulated per seed for the calibration (:func:`contact_lines`).
+CONTACT_CHUNK = 320
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,15 @@ class FamilyCalibration:
         much as the prior's lines in the pooled fit: milder lines, as a careful
         measurement records, so that their intervals are not sized by the prior's
         harshest corruptions alone (0: the prior's lines only).
+    contacts : multi-asperity lines that one effective PT describes
+        (:func:`~stickslip.simulators.contacts.contact_set`, kind ``"multi"``, seed
+        ``contacts_seed``, paper preset; those within the misfit limit kept,
+        :func:`~stickslip.simulators.contacts.described_dataset`) added to the clean
+        trajectories before the effects are drawn: their truth is the PT that best
+        reproduces the line, which the members, trained on single-point PT, read with
+        an error their spread does not show (0: none).
+    contacts_seed : seed of the first :data:`CONTACT_CHUNK` of those lines (of the next
+        chunk, the seed after it, and so on).
     """
 
     prior: fx.NuisancePrior = dataclasses.field(default_factory=fx.NuisancePrior)
@@ -97,10 +111,13 @@ class FamilyCalibration:
     #: calibration lines re-pixelated coarser, as in training
     #: (:func:`~stickslip.estimators.line.training.coarse_factors`)
     coarse_fraction: float = 0.3
+    contacts: int = 0
+    contacts_seed: int = 5111
 
     def to_dict(self) -> dict:
         return {"prior": self.prior.to_dict(), "seed": self.seed, "draws": self.draws,
-                "coarse_fraction": self.coarse_fraction,
+                "coarse_fraction": self.coarse_fraction, "contacts": self.contacts,
+                "contacts_seed": self.contacts_seed,
                 "implementation": self.implementation, "training_draws": self.training_draws,
                 "families": list(self.prior.enabled()),
                 "offset": None if self.offset is None else self.offset.to_dict(),
@@ -226,16 +243,42 @@ def calibration_lines(ens: LineEnsemble, lines: FamilyLines, offset: bool = Fals
     return cs, line_targets(p["U0_eV"], p["K_N_m"], F, a, spec)
 
 
+def contact_lines(settings: FamilyCalibration,
+                  work: str | os.PathLike | None = None) -> Dataset:  # fmt: skip
+    """The described multi-asperity lines of ``settings`` (``settings.contacts`` drawn,
+    those one PT describes kept; :attr:`FamilyCalibration.contacts`): chunks of
+    :data:`CONTACT_CHUNK` lines on seeds ``contacts_seed``, ``contacts_seed + 1``, ...
+    (the last one shorter), each cached in ``work`` where given."""
+    parts = []
+    for k, start in enumerate(range(0, settings.contacts, CONTACT_CHUNK)):
+        n, seed = min(CONTACT_CHUNK, settings.contacts - start), settings.contacts_seed + k
+        if work is None:
+            cs = contact_set(n, "multi", seed)
+            x, F, truth = cs.x_nm, cs.force_nN, cs.truth
+        else:
+            x, F, truth = cached_contact_set(n, "multi", seed, work)
+        parts.append(described_dataset(x, F, truth))
+    return concat_datasets(parts) if len(parts) > 1 else parts[0]
+
+
 def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
-                          settings: FamilyCalibration | None = None) -> dict:  # fmt: skip
+                          settings: FamilyCalibration | None = None,
+                          contacts: Dataset | None = None) -> dict:  # fmt: skip
     """Re-fit the spread calibration of ``ens`` (in place) on lines drawn from the
     nuisance prior on the clean trajectories ``clean``; the members are unchanged.
 
     Keeps the model's classes of lines and its power law. Returns the calibration
     report (:func:`~stickslip.estimators.line.training.calibrate_and_report`) with the
-    settings under ``"family_calibration"``.
+    settings under ``"family_calibration"``. ``contacts``: the lines of
+    :func:`contact_lines` where already made (simulated here when
+    ``settings.contacts`` asks for them and none are given); they join ``clean``.
     """
     settings = settings or FamilyCalibration()
+    if settings.contacts:
+        contacts = contact_lines(settings) if contacts is None else contacts
+        # the truths and conditions both hold (a pool may lack the dynamics columns)
+        clean = concat_datasets([clean, contacts],
+                                columns=[k for k in contacts.params if k in clean.params])
     lines = draw_family_lines(clean, settings.prior, settings.seed, settings.draws,
                               settings.implementation)  # fmt: skip
     if settings.offset is not None:
@@ -262,5 +305,6 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     ens.offset, ens.compression = settings.offset, settings.compression
     report = calibrate_and_report(ens, cs, Y, ens.classes, power, groups)
     report["family_calibration"] = {**settings.to_dict(), "n_trajectories": clean.n,
+                                    "n_contact_lines": contacts.n if settings.contacts else 0,
                                     "clean_fingerprint": clean.fingerprint()}  # fmt: skip
     return report
