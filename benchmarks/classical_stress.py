@@ -667,7 +667,7 @@ def score_afm(data: Dataset, est: ClassicalEstimator) -> dict[str, Any]:
                          and np.isfinite(r["U0_eV"]) for r in rows], dtype=bool)  # fmt: skip
     out: dict[str, Any] = {"n": len(rows), "answered": _frac(answered)}
     for key, name in (("K_N_m", "K"), ("U0_eV", "U0")):
-        got = np.array([r[key] for r in rows], dtype=float)[answered]
+        got = np.array([r.get(key, np.nan) for r in rows], dtype=float)[answered]
         rel = got / np.asarray(data.params[key], float)[ok][answered] - 1.0
         a = np.abs(rel)
         out[f"{name}_rel_rmse"] = float(np.sqrt(np.mean(rel**2))) if rel.size else np.nan
