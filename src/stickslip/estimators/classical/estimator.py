@@ -23,7 +23,8 @@ without sticking); ``not stick-slip`` (the force jumps up, as well as or instead
 down); ``too noisy`` (nothing stands out of the noise, or the noise is a large fraction
 of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak);
 ``sticks disagree`` (the sticks' own K's scatter by more than :data:`MAX_K_SPREAD` of
-the line's K: no one spring fits them). Every flag but ``ok`` comes without K.
+the line's K: no one spring fits them; or the slip levels show a baseline left in the
+sticks, :data:`LEVEL_AGREEMENT`). Every flag but ``ok`` comes without K.
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ robust straight-line fit of its straight part. The slip position inside its pixe
 follows from pixel averaging: the force integral over the samples between two sticks
 must equal that of the pre-slip branch up to the slip and the post-slip branch after
 it. That gives the force just before (``F_slip``) and after (``F_after``) each slip free
-of the pixel-averaging bias.
+of the pixel-averaging bias. Those levels, which stationary slips keep, give a second
+reading of each stick's slope (:func:`level_slopes`) that checks the baseline.
 """
 
 from __future__ import annotations
