@@ -35,8 +35,10 @@ A. Spring-block lines (:mod:`stickslip.simulators.spring_block`: a rigid slider 
      sliding): stuck_fraction < :data:`OSC_MAX` (0.1). Should be refused;
    - ``grey``: everything else; scored only by the no-row-more-than-20 %-off rule.
 
-   Given to the estimator as ``stickslip label --temperature 0 --velocity v`` does:
-   :class:`ClassicalEstimator` ``.predict`` with ``x_nm = X_m * 1e9``,
+   Given to the estimator as ``stickslip label --temperature 0 --velocity v`` does,
+   less the AFM range check that refuses forces beyond 1e4 nN and scans beyond 0.1 mm
+   before estimating (a macroscopic slider lies outside it):
+   :class:`ClassicalEstimator` ``.estimate`` with ``x_nm = X_m * 1e9``,
    ``force_nN = F_N * 1e9`` (stick slope in nN/nm = N/m), temperature 0 K, velocity
    ``v * 1e9`` nm/s, the reference lattice.
 
@@ -578,7 +580,11 @@ def score_spring_block(tab: dict[str, np.ndarray], xs: list[np.ndarray],
                         meta={"velocity_nm_per_s": float(tab["velocity_m_per_s"][i] * 1e9),
                               "temperature_K": 0.0})
                   for i in range(a, min(a + chunk, n))]  # fmt: skip
-        for r in est.predict(traces).rows:
+        # estimate(), not predict(): a macroscopic slider's forces (up to 1e9 nN) and
+        # scans (mm) lie outside the AFM range that predict() refuses before estimating
+        rows, _ = est.estimate(traces, est.conditions(traces))
+        for r in rows:
+            r = {"quality": r} if isinstance(r, str) else r
             out["quality"].append(str(r.get("quality", "")))
             out["regime"].append(str(r.get("regime", "") or ""))
             out["k_exp"].append(float(r.get("k_exp_N_m", np.nan)))
@@ -661,7 +667,7 @@ def score_afm(data: Dataset, est: ClassicalEstimator) -> dict[str, Any]:
                          and np.isfinite(r["U0_eV"]) for r in rows], dtype=bool)  # fmt: skip
     out: dict[str, Any] = {"n": len(rows), "answered": _frac(answered)}
     for key, name in (("K_N_m", "K"), ("U0_eV", "U0")):
-        got = np.array([r[key] for r in rows], dtype=float)[answered]
+        got = np.array([r.get(key, np.nan) for r in rows], dtype=float)[answered]
         rel = got / np.asarray(data.params[key], float)[ok][answered] - 1.0
         a = np.abs(rel)
         out[f"{name}_rel_rmse"] = float(np.sqrt(np.mean(rel**2))) if rel.size else np.nan

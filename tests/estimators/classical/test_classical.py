@@ -171,6 +171,27 @@ def test_slips_of_two_sizes_taking_turns_refuse_K():
     assert est.quality == "ok"
 
 
+@pytest.mark.parametrize("phase", [0.0, 1.6, 3.1, 4.7])
+def test_few_cycles_under_a_wandering_baseline_are_right_or_refused(phase):
+    # five slips, the baseline wandering by ten drops: the cycle means cannot pin it
+    # down, and the sticks rise 2-4x the spring where it is left in
+    slip_x = np.array([2.0, 5.5, 9.0, 12.5, 16.0])
+    x, F = _sawtooth(slip_x, k=1.0, drops=3.5, n=20_000)
+    u = x / x[-1]
+    wander = np.sin(2.0 * np.pi * 1.3 * u + phase) + 0.5 * np.sin(np.pi * 3.0 * u + 2 * phase)
+    F += 35.0 * wander / np.ptp(wander)
+    F += np.random.default_rng(int(10 * phase)).normal(0, 0.01, F.size)
+    est = estimate_trace(x, F, temperature_K=0)
+    assert est.quality != "ok" or est.k_exp_N_m == pytest.approx(1.0, rel=0.10)
+    # the same line under a straight drift of ten drops: the cycle means pin it down,
+    # the slip levels agree, and it is answered
+    x, F = _sawtooth(slip_x, k=1.0, drops=3.5, n=20_000)
+    F += 35.0 * u
+    F += np.random.default_rng(int(10 * phase)).normal(0, 0.01, F.size)
+    est = estimate_trace(x, F, temperature_K=0)
+    assert est.quality == "ok" and est.k_exp_N_m == pytest.approx(1.0, rel=0.05)
+
+
 @pytest.fixture
 def macro() -> tuple[np.ndarray, np.ndarray]:
     if not MACRO.is_file():

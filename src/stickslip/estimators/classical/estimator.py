@@ -23,9 +23,10 @@ without sticking); ``not stick-slip`` (the force jumps up, as well as or instead
 down); ``too noisy`` (nothing stands out of the noise, or the noise is a large fraction
 of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak);
 ``sticks disagree`` (the sticks' own K's scatter by more than :data:`MAX_K_SPREAD` of
-the line's K: no one spring fits them); ``two regimes`` (the sticks' slope changes
-part-way: a tip that changed); ``alternating slips`` (slips of two sizes take turns:
-more than one contact). Every flag but ``ok`` comes without K.
+the line's K: no one spring fits them; or the slip levels show a baseline left in the
+sticks, :data:`LEVEL_AGREEMENT`); ``two regimes`` (the sticks' slope changes part-way:
+a tip that changed); ``alternating slips`` (slips of two sizes take turns: more than
+one contact). Every flag but ``ok`` comes without K.
 """
 
 from __future__ import annotations
@@ -71,6 +72,15 @@ TANGENT_MAJORITY = 0.5
 # (benchmarks/classical_lab.py --tune): the smallest value that refuses at most 5 % more
 # of any set there.
 MAX_K_SPREAD = 0.8
+# Two readings of the spring: the sticks' slopes, and the same slopes less the trend of
+# the slip levels beside each stick (:func:`slips.level_slopes`: stationary slips keep
+# their levels, so a trend is baseline the line's baseline left in). Where their medians
+# differ by more than this fraction of k_exp and by more than their standard errors, the
+# baseline is not resolved at the scale of a cycle (a few cycles under a baseline that
+# wanders by several drops read k at 1.3-8x the spring) and K is refused. A pure number:
+# the mark beyond which an answer misleads (the stress corpus's 20 %). A line with fewer
+# than two sticks between fitted slips cannot be checked and is refused too.
+LEVEL_AGREEMENT = 0.2
 
 # output fields of the kernel
 (F_MEAN, F_MEAN_STD, U0, U0_STD, K_, K_STD, ETA, ETA_STD, K_EXP, K_EXP_STD, F_PEAK,
@@ -109,6 +119,14 @@ REGIMES = ("single slip", "multiple slip", "stick-slip", "smooth", "not stick-sl
 def _spread(v: np.ndarray) -> float:
     vals = v[~np.isnan(v)]
     return mad_sigma(vals) if vals.size > 1 else np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def _median_se(v: np.ndarray) -> float:
+    """Standard error of the median of ``v`` (NaN left out): its robust spread times
+    1.25 (about sqrt(pi/2), the median's efficiency at normal scatter) over sqrt(n)."""
+    n = np.sum(~np.isnan(v))
+    return 1.25 * _spread(v) / np.sqrt(n) if n > 1 else np.nan
 
 
 # inlined into its one caller: numba optimises a kernel's LLVM module again with every
@@ -219,7 +237,7 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, G: np.ndarray, segs: np.ndarray
                              np.array([Ft_med]), a, T, v, mass_kg, gamma, np.empty(1))  # fmt: skip
         # switch only if K stays clearly stiffer at the tangents' median minus
         # TANGENT_SIGMAS standard errors (an end tangent is noisier than a line)
-        se = 1.25 * _spread(kt) / np.sqrt(kt.size)
+        se = _median_se(kt)
         K_lo = k_from_segment(kt_med - TANGENT_SIGMAS * se, Ft_med, Ft_med, Fmax_t, a)
         if K_lo > TANGENT_GAIN * K and not np.isnan(K_t):
             Fmax, K = Fmax_t, K_t
@@ -228,6 +246,17 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, G: np.ndarray, segs: np.ndarray
             eta = 2.0 * np.pi * Fmax / (a * K)
     if eta < 1.0:  # no PT stick-slip has this peak and slope: the drops are not slips
         out[STATUS] = 2
+        return
+    # the slip levels' check of the baseline (LEVEL_AGREEMENT)
+    kl = sl.level_slopes(segs, slp)
+    kl = kl[~np.isnan(kl)]
+    se = _median_se(kseg)
+    if kl.size < 2 or not se <= LEVEL_AGREEMENT * out[K_EXP]:
+        out[STATUS] = STICKS_DISAGREE
+        return
+    gap = median(kl) - out[K_EXP]
+    if abs(gap) > LEVEL_AGREEMENT * out[K_EXP] and abs(gap) > np.hypot(se, _median_se(kl)):
+        out[STATUS] = STICKS_DISAGREE  # the slip levels trend: a baseline left in
         return
     k_spread = _spread(Kseg)
     if k_spread > MAX_K_SPREAD * K:

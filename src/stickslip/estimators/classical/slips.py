@@ -7,7 +7,8 @@ robust straight-line fit of its straight part. The slip position inside its pixe
 follows from pixel averaging: the force integral over the samples between two sticks
 must equal that of the pre-slip branch up to the slip and the post-slip branch after
 it. That gives the force just before (``F_slip``) and after (``F_after``) each slip free
-of the pixel-averaging bias.
+of the pixel-averaging bias. Those levels, which stationary slips keep, give a second
+reading of each stick's slope (:func:`level_slopes`) that checks the baseline.
 """
 
 from __future__ import annotations
@@ -231,6 +232,29 @@ def fit_sticks(x: np.ndarray, F: np.ndarray, cycles: np.ndarray, tol: float
             continue
         _locate_slip(x, F, pre, post, tol, slips[k])
     return segs, slips
+
+
+@njit(cache=True, error_model="numpy")
+def level_slopes(segs: np.ndarray, slips: np.ndarray) -> np.ndarray:
+    """Each stick's slope less the trend of the slip levels on either side of it.
+
+    Stationary stick-slip slips from and to the same levels cycle after cycle, so
+    where the force before and after the slip at one end of a stick differ from those
+    at its other end, the difference is baseline that the line's baseline left in
+    (:func:`~.segmentation.baseline` follows the cycle means, which few cycles do not
+    pin down); its slope over the stick comes off the stick's slope. NaN for the
+    first and last sticks (one slip beside them) and where a fit is missing.
+    """
+    ns = slips.shape[0]
+    out = np.full(ns + 1, np.nan)
+    for k in range(1, ns):
+        a, b = slips[k - 1], slips[k]
+        dX = b[SLIP_X] - a[SLIP_X]
+        if not dX > 0:  # NaN: a slip without its fits
+            continue
+        trend = 0.5 * ((b[SLIP_F] - a[SLIP_F]) + (b[SLIP_F_AFTER] - a[SLIP_F_AFTER])) / dX
+        out[k] = segs[k, SEG_SLOPE] - trend
+    return out
 
 
 @njit(cache=True, error_model="numpy")
