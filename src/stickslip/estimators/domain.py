@@ -101,7 +101,7 @@ from threadpoolctl import ThreadpoolController
 import stickslip.estimators.segmentation as sg
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.estimators.calibration import Z68, lognormal_std
-from stickslip.estimators.table import BOUNDS, OK, TARGETS, VOLT_NAMES, is_missing
+from stickslip.estimators.table import BOUNDS, OK, TARGETS, TWO_REGIMES, VOLT_NAMES, is_missing
 from stickslip.robust import mad_sigma, median, percentile, select_tails, white_sigma
 
 #: The trained window of eta (the training range of every learned model, PHYSICS.md).
@@ -456,6 +456,22 @@ def widen_rows(rows: Sequence[MutableMapping[str, Any]], factor: float = WIDEN_F
             _put(rows, f"{k}_std", np.where(from68, lognormal, factor * sd), ok)
 
 
+def _locate_refused_changes(rows: Sequence[MutableMapping[str, Any]],
+                            x_nm: Sequence[np.ndarray],
+                            force_nN: Sequence[np.ndarray]) -> None:  # fmt: skip
+    """Rows refused as two regimes (the classical estimator's sticks change slope) get
+    ``change_nm`` and the place in their reason, where the change check finds it."""
+    idx = [i for i, r in enumerate(rows) if r.get("quality") == TWO_REGIMES]
+    if not idx:
+        return
+    checks = trace_checks([x_nm[i] for i in idx], [force_nN[i] for i in idx])
+    for j, i in enumerate(idx):
+        if checks.change_score[j] > 1.0:
+            rows[i]["change_nm"] = float(checks.change_nm[j])
+            rows[i]["domain_reason"] = (f"no estimate: {TWO_REGIMES} (the line changes "
+                                        f"part-way at x = {checks.change_nm[j]:.2f} nm)")
+
+
 def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
            force_nN: Sequence[np.ndarray], lattice_nm: Sequence[float],
            widen: bool = True, eta_edge: float = ETA_WINDOW[0]) -> None:  # fmt: skip
@@ -473,6 +489,7 @@ def assess(rows: Sequence[MutableMapping[str, Any]], x_nm: Sequence[np.ndarray],
         if r.get("quality") != OK:
             r.update(in_domain=False, domain_score=None,
                      domain_reason=f"no estimate: {r.get('quality')}")  # fmt: skip
+    _locate_refused_changes(rows, x_nm, force_nN)
     if not todo:
         return
     checks = trace_checks([x_nm[i] for i in todo], [force_nN[i] for i in todo])

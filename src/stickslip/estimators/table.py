@@ -56,6 +56,9 @@ PROVENANCE = ("file", "channel", "direction", "line", "load", "load_unit")
 COLUMNS = (*HEAD, *TARGETS[:3], *VOLT_TARGETS, TARGETS[3], *STD_COLUMNS[:3], *VOLT_STD_COLUMNS,
            STD_COLUMNS[3], *INTERVAL_COLUMNS, *CONDITION_COLUMNS, *PROVENANCE)  # fmt: skip
 OK = "ok"
+#: The ``quality`` of a row refused because the line is two regimes (its sticks change
+#: slope part-way): the verdict then says where.
+TWO_REGIMES = "two regimes"
 TABLE_SUFFIXES = (".csv", ".json", ".parquet")
 # trace metadata that is not provenance: the unit is a reading detail, the conditions
 # have their own columns

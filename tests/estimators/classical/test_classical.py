@@ -211,3 +211,15 @@ def test_real_macro_stick_slope_is_the_spring(macro):
     est = estimate_trace(x, F, temperature_K=0)
     assert est.quality == "ok" and est.n_slips > 50
     assert est.k_exp_N_m == pytest.approx(1002.0, rel=0.10)
+
+
+def test_a_refused_two_regime_line_says_where_it_changes():
+    from stickslip.estimators.classical import ClassicalEstimator
+    from stickslip.traces.trace import Trace
+
+    x, F = _sticks([5.0] * 14 + [8.0] * 16)
+    row = ClassicalEstimator().predict([Trace(x_nm=x, force_nN=F, name="t")]).rows[0]
+    assert row["quality"] == "two regimes" and row["in_domain"] is False
+    change_at = 14 * (2.0 / 5.0 + 0.01)  # after fourteen sticks of 2/5 nm each
+    assert row["change_nm"] == pytest.approx(change_at, abs=0.5)
+    assert f"at x = {row['change_nm']:.2f} nm" in row["domain_reason"]

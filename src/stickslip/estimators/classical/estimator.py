@@ -44,6 +44,7 @@ from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
+from stickslip.estimators.table import TWO_REGIMES as TWO_REGIMES_QUALITY
 from stickslip.robust import mad_sigma, median, percentile
 from stickslip.units import EV_TO_NN_NM
 
@@ -96,7 +97,7 @@ QUALITY = {
     4: "inconsistent slopes",
     5: "sticks disagree",
     6: "not stick-slip",
-    7: "two regimes",
+    7: TWO_REGIMES_QUALITY,
     8: "alternating slips",
 }
 #: The flag of a line whose slips are stick-slip but whose sticks fit no one spring: a
