@@ -748,8 +748,9 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     score is the best split's ratio over its price ``CHANGE_PENALTY ln n``: above 1, the
     series has two levels (with at least a fifth of the values on each side, values
     clipped at 4 s from the median of their own level, a step of at least
-    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better than a straight line by the
-    BIC price of the step's place); 0 for fewer than eight values.
+    :data:`MIN_LEVEL_CHANGE`, and two levels that fit better, by the BIC, than a slow
+    trend of degree 1 to :data:`TREND_DEGREE` and than two levels joined by a ramp over
+    three values or more); 0 for fewer than eight values.
     """
     n = v.size
     T = np.full(n, np.nan)
