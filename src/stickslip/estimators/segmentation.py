@@ -788,9 +788,7 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
         return T, 0.0
     # a step, not a drift: two levels and a place must explain the series better, by
     # the BIC, than a slow trend (a polynomial of degree 1 to TREND_DEGREE) through it
-    mu1 = np.mean(w[:arg])
-    mu2 = np.mean(w[arg:])
-    rss_step = max(np.sum((w[:arg] - mu1) ** 2) + np.sum((w[arg:] - mu2) ** 2), 1e-300)
+    rss_step = max(_level_rss(w, arg), 1e-300)
     u = (np.arange(n) - 0.5 * (n - 1)) / (0.5 * n)
     for deg in range(1, TREND_DEGREE + 1):
         A = np.empty((n, deg + 1))
@@ -807,6 +805,20 @@ def _change_profile(v: np.ndarray) -> tuple[np.ndarray, float]:
     if _ramp_rss(v, arg) * np.exp(np.log(n) / n) < _level_rss(v, arg):
         return T, 0.0
     return T, np.nanmax(T) / (CHANGE_PENALTY * np.log(n))
+
+
+@njit(cache=True, error_model="numpy")
+def _change_series(cycles: np.ndarray, col: int) -> np.ndarray:
+    """The per-cycle series a change of level is sought in: the log rise rates
+    (``CY_RATE``) or the peaks' level in median drops (``CY_TOP``), of every cycle but
+    the first (its stick starts where the line does) and the final stick; empty where
+    it cannot be formed (a rate not above 0, no drop)."""
+    m = cycles.shape[0] - 1
+    v = cycles[1:m, col]
+    if col == CY_TOP:
+        drop = median(cycles[1:m, CY_DROP])
+        return v / drop if drop > 0 else v[:0]
+    return np.log(v) if np.all(v > 0) else v[:0]
 
 
 @njit(cache=True, error_model="numpy")
@@ -832,16 +844,9 @@ def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
         return -1, 0.0
     total = np.zeros(m - 1)
     best = 0.0
-    drop = median(cycles[1:m, CY_DROP])
-    for col in (CY_RATE, CY_TOP):  # the first stick starts where the line does
-        v = cycles[1:m, col]
-        if col == CY_TOP:
-            if not drop > 0:
-                continue
-            v = v / drop  # the peaks' level in drops
-        elif np.all(v > 0):
-            v = np.log(v)
-        else:
+    for col in (CY_RATE, CY_TOP):
+        v = _change_series(cycles, col)
+        if v.size == 0:
             continue
         T, score = _change_profile(v)
         if score > 1.0:
@@ -858,13 +863,10 @@ def cycle_change(cycles: np.ndarray) -> tuple[int, float]:
 def slope_change(cycles: np.ndarray) -> float:
     """The score of a change of level part-way along a line in its sticks' log rise rates
     (:func:`_change_profile`; above 1: sticks of two slopes, two springs in one line)."""
-    m = cycles.shape[0] - 1
-    if m < 9:
+    if cycles.shape[0] - 1 < 9:
         return 0.0
-    v = cycles[1:m, CY_RATE]
-    if not np.all(v > 0):
-        return 0.0
-    return _change_profile(np.log(v))[1]
+    v = _change_series(cycles, CY_RATE)
+    return _change_profile(v)[1] if v.size else 0.0
 
 
 @njit(cache=True, error_model="numpy")

@@ -1240,11 +1240,15 @@ def described_dataset(x_nm: np.ndarray, force_nN: np.ndarray, truth: dict[str, n
     return Dataset(F, np.asarray(x_nm, float), params, {"kind": "contacts-described", "n": n})
 
 
-def cached_contact_set(n: int, kind: str, seed: int, work: str | os.PathLike
+def cached_contact_set(n: int, kind: str, seed: int, work: str | os.PathLike | None
                        ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:  # fmt: skip
     """``(x_nm, force_nN, truth)`` of :func:`contact_set` ``(n, kind, seed)`` (paper preset),
     simulated once into ``work/{kind}_{n}_{seed}.npz`` (written whole, then renamed) and
-    read from there after; the truth's numeric columns only."""
+    read from there after; the truth's numeric columns only. ``work`` None: simulated
+    and returned, nothing written."""
+    if work is None:
+        cs = contact_set(n, kind, seed, PhysicalSettings())
+        return np.asarray(cs.x_nm, float), np.asarray(cs.force_nN, float), cs.truth
     path = Path(work) / f"{kind}_{n}_{seed}.npz"
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -43,7 +43,7 @@ from stickslip.estimators.line.training import (
 )
 from stickslip.estimators.offsets import CompressionPrior, OffsetPrior, compression_moment
 from stickslip.simulators import effects as fx
-from stickslip.simulators.contacts import cached_contact_set, contact_set, described_dataset
+from stickslip.simulators.contacts import cached_contact_set, described_dataset
 from stickslip.simulators.instrument import apply_instrument
 from stickslip.traces.dataset import Dataset, concat_datasets
 
@@ -252,12 +252,7 @@ def contact_lines(settings: FamilyCalibration,
     parts = []
     for k, start in enumerate(range(0, settings.contacts, CONTACT_CHUNK)):
         n, seed = min(CONTACT_CHUNK, settings.contacts - start), settings.contacts_seed + k
-        if work is None:
-            cs = contact_set(n, "multi", seed)
-            x, F, truth = cs.x_nm, cs.force_nN, cs.truth
-        else:
-            x, F, truth = cached_contact_set(n, "multi", seed, work)
-        parts.append(described_dataset(x, F, truth))
+        parts.append(described_dataset(*cached_contact_set(n, "multi", seed, work)))
     return concat_datasets(parts) if len(parts) > 1 else parts[0]
 
 
