@@ -55,6 +55,9 @@ B. AFM lab-like lines (the project's own simulators, new seeds), scored on U0 an
      ``make_bench`` derives its per-material streams 3921, 4921, 5921);
    - ``bench + tilt``: the same plus the tilt/curvature, sized on the recorded line's
      range (p99.5 - p0.5; seed 3922);
+   - ``... + tilt, zero-mean``: each tilted set with its tilt less the tilt's mean over
+     the line: the tilt's shape without the offset of the force zero it also adds,
+     which one line cannot tell from friction (a trace/retrace pair cancels it);
    - ``clean PT``: paper-preset lines at 296 K, eta in [1.5, 40] (as
      ``benchmarks/classical.py`` makes them; seed 3931).
 
@@ -557,8 +560,22 @@ def afm_sets(work: Path, quick: bool) -> dict[str, tuple[Dataset, np.ndarray | N
                        np.random.default_rng(SEED_BENCH_TILT))  # fmt: skip
     bench_tilt = Dataset(F, bench.x_nm, bench.params, {**bench.attrs, "kind": "bench-tilt"})
     return {"families": (d, None), "families + tilt": (fam_tilt, r_fam),
+            "families + tilt, zero-mean": (_zero_mean_tilt(d, fam_tilt), r_fam),
             "bench": (bench, None), "bench + tilt": (bench_tilt, r_bench),
+            "bench + tilt, zero-mean": (_zero_mean_tilt(bench, bench_tilt), r_bench),
             "clean PT": (clean_pt(work, n), None)}
+
+
+def _zero_mean_tilt(clean: Dataset, tilted: Dataset) -> Dataset:
+    """The tilted set with each line's tilt less its own mean: the tilt's shape without
+    the offset it adds to the line (one line cannot tell an offset of its force zero
+    from friction; a trace/retrace pair can), so the two tilted sets tell apart what
+    the shape costs from what the offset costs."""
+    F0 = np.asarray(clean.force_nN, float)
+    base = np.asarray(tilted.force_nN, float) - F0
+    F = F0 + base - base.mean(axis=1, keepdims=True)
+    return Dataset(F, tilted.x_nm, tilted.params, {**tilted.attrs,
+                                                    "kind": f"{tilted.attrs['kind']}-zero-mean"})
 
 
 # -------------------------------------------------------------------- scoring
