@@ -59,10 +59,17 @@ B. AFM lab-like lines (the project's own simulators, new seeds), scored on U0 an
      the line: the tilt's shape without the offset of the force zero it also adds,
      which one line cannot tell from friction (a trace/retrace pair cancels it);
    - ``clean PT``: paper-preset lines at 296 K, eta in [1.5, 40] (as
-     ``benchmarks/classical.py`` makes them; seed 3931).
+     ``benchmarks/classical.py`` makes them; seed 3931);
+   - ``clean PT + tilt``: the same plus a tilt/curvature sized on each line's range
+     (seed 3933), one line at a time;
+   - ``clean PT + tilt, trace/retrace pairs``: the same trace rows, each estimated beside
+     its retrace (the same parameters simulated again, seed 3932, with the same tilt,
+     stored as a map reader stores a retrace): the classical estimator reads a pair less
+     the offset both directions share.
 
 Seeds: 3901 (broad draws), 3902 (paper draws), 3903 (strength disorder, stream = line),
-3904 (instrument effects, stream = line), 3911, 3912, 3913, 3921, 3922, 3931 as above.
+3904 (instrument effects, stream = line), 3911, 3912, 3913, 3921, 3922, 3931-3933 as
+above.
 Nothing else in the project uses 3901-3999.
 
 Scoring: a row is answered iff ``quality == "ok"`` and the number is finite. Printed per
@@ -131,7 +138,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SEED_BROAD, SEED_PAPER, SEED_STRENGTH, SEED_INSTRUMENT = 3901, 3902, 3903, 3904
 SEED_POOL, SEED_FAMILIES, SEED_FAMILY_TILT = 3911, 3912, 3913
 SEED_BENCH, SEED_BENCH_TILT = 3921, 3922
-SEED_CLEAN = 3931
+SEED_CLEAN, SEED_CLEAN_RETRACE, SEED_CLEAN_TILT = 3931, 3932, 3933
 #: Every seed this corpus uses (all in 3901-3999).
 SEEDS = {"broad": SEED_BROAD, "paper": SEED_PAPER, "strength": SEED_STRENGTH,
          "instrument": SEED_INSTRUMENT, "pool": SEED_POOL, "families": SEED_FAMILIES,
@@ -512,9 +519,12 @@ def _range(F: np.ndarray) -> np.ndarray:
     return np.percentile(F, 99.5, axis=1) - np.percentile(F, 0.5, axis=1)
 
 
-def clean_pt(work: Path, n: int) -> Dataset:
-    """Paper-preset lines at 296 K with 1.5 <= eta <= 40 (cached)."""
-    path = work / f"clean_pt_{n}_{SEED_CLEAN}.h5"
+def clean_pt(work: Path, n: int, sim_seed: int | None = None) -> Dataset:
+    """Paper-preset lines at 296 K with 1.5 <= eta <= 40 (cached); ``sim_seed``: the same
+    parameters simulated again with another thermal noise (a retrace)."""
+    sim_seed = SEED_CLEAN if sim_seed is None else sim_seed
+    suffix = "" if sim_seed == SEED_CLEAN else f"_sim{sim_seed}"
+    path = work / f"clean_pt_{n}_{SEED_CLEAN}{suffix}.h5"
     s = PhysicalSettings()
     if not path.exists():
         rng = np.random.default_rng(SEED_CLEAN)
@@ -524,11 +534,12 @@ def clean_pt(work: Path, n: int) -> Dataset:
         U, K = U[keep][:n], K[keep][:n]
         parts = []
         for a in tqdm(range(0, n, 25), desc="clean PT lines", unit="x25"):
-            parts.append(simulate(U[a:a + 25], K[a:a + 25], s, seed=SEED_CLEAN,
+            parts.append(simulate(U[a:a + 25], K[a:a + 25], s, seed=sim_seed,
                                   indices=np.arange(a, min(a + 25, n))).force_nN)  # fmt: skip
         part = path.with_name(path.name + ".partial")
         with h5py.File(part, "w") as h:
-            h.attrs["config"] = json.dumps({"seed": SEED_CLEAN, "n": n, "physics":
+            h.attrs["config"] = json.dumps({"seed": SEED_CLEAN, "sim_seed": sim_seed, "n": n,
+                                            "physics":
                                             dataclasses.asdict(s)}, sort_keys=True)  # fmt: skip
             h["force_nN"] = np.vstack(parts)
             h["U0_eV"], h["K_N_m"] = U, K
@@ -543,9 +554,21 @@ def clean_pt(work: Path, n: int) -> Dataset:
     return Dataset(F, x, params, {"kind": "clean-pt"})
 
 
-def afm_sets(work: Path, quick: bool) -> dict[str, tuple[Dataset, np.ndarray | None]]:
-    """The AFM sets with, for the tilted ones, each line's tilt in force ranges."""
+def afm_sets(work: Path, quick: bool) -> tuple[dict[str, tuple[Dataset, np.ndarray | None]],
+                                                dict[str, Dataset]]:  # fmt: skip
+    """The AFM sets with, for the tilted ones, each line's tilt in force ranges; and the
+    retrace rows of the sets scored as trace/retrace pairs (stored as a map reader
+    stores them: reversed in x and sign-flipped, the tilt not reversing with the scan)."""
     n = N_AFM_QUICK if quick else N_AFM
+    clean = clean_pt(work, n)
+    Fc = np.asarray(clean.force_nN, float)
+    F, r_clean = _tilt(Fc, np.asarray(clean.x_nm, float), _range(Fc),
+                       np.random.default_rng(SEED_CLEAN_TILT))  # fmt: skip
+    clean_tilt = Dataset(F, clean.x_nm, clean.params, {**clean.attrs, "kind": "clean-pt-tilt"})
+    base = F - Fc
+    retrace = clean_pt(work, n, SEED_CLEAN_RETRACE)
+    retrace_tilt = Dataset(np.asarray(retrace.force_nN, float) - base[:, ::-1], retrace.x_nm,
+                           retrace.params, {**retrace.attrs, "kind": "clean-pt-tilt-retrace"})
     pool = cached_randomised_set(RandomisedConfig(n=n, seed=SEED_POOL, chunk=50), work)
     fam = draw_family_lines(pool, fx.NuisancePrior(), SEED_FAMILIES)
     d = fam.data
@@ -563,7 +586,9 @@ def afm_sets(work: Path, quick: bool) -> dict[str, tuple[Dataset, np.ndarray | N
             "families + tilt, zero-mean": (_zero_mean_tilt(d, fam_tilt), r_fam),
             "bench": (bench, None), "bench + tilt": (bench_tilt, r_bench),
             "bench + tilt, zero-mean": (_zero_mean_tilt(bench, bench_tilt), r_bench),
-            "clean PT": (clean_pt(work, n), None)}
+            "clean PT": (clean, None), "clean PT + tilt": (clean_tilt, r_clean),
+            "clean PT + tilt, trace/retrace pairs": (clean_tilt, r_clean)}, {
+            "clean PT + tilt, trace/retrace pairs": retrace_tilt}
 
 
 def _zero_mean_tilt(clean: Dataset, tilted: Dataset) -> Dataset:
@@ -676,10 +701,23 @@ def spring_block_report(tab: dict[str, np.ndarray], est: dict[str, np.ndarray]) 
     return res
 
 
-def score_afm(data: Dataset, est: ClassicalEstimator) -> dict[str, Any]:
-    """Answered fraction, rel. RMSE, median and 95th percentile of U0 and K."""
+def _as_map_line(traces: list[Trace], direction: str) -> list[Trace]:
+    for t in traces:
+        t.meta.update(direction=direction, line=t.meta["index"])
+        t.source = "pairs"
+    return traces
+
+
+def score_afm(data: Dataset, est: ClassicalEstimator,
+              retrace: Dataset | None = None) -> dict[str, Any]:  # fmt: skip
+    """Answered fraction, rel. RMSE, median and 95th percentile of U0 and K (of the
+    trace rows, estimated beside their ``retrace`` rows where given)."""
     ok = in_eta_window(data.params["eta"])
-    rows = est.predict(dataset_traces(data, rows=np.flatnonzero(ok))).rows
+    traces = dataset_traces(data, rows=np.flatnonzero(ok))
+    if retrace is not None:
+        traces = (_as_map_line(traces, "trace")
+                  + _as_map_line(dataset_traces(retrace, rows=np.flatnonzero(ok)), "retrace"))
+    rows = est.predict(traces).rows[:int(ok.sum())]
     answered = np.array([r["quality"] == "ok" and np.isfinite(r["K_N_m"])
                          and np.isfinite(r["U0_eV"]) for r in rows], dtype=bool)  # fmt: skip
     out: dict[str, Any] = {"n": len(rows), "answered": _frac(answered)}
@@ -772,7 +810,7 @@ def shift_seeds(shift: int) -> None:
     g = globals()
     for name in ("SEED_BROAD", "SEED_PAPER", "SEED_STRENGTH", "SEED_INSTRUMENT", "SEED_POOL",
                  "SEED_FAMILIES", "SEED_FAMILY_TILT", "SEED_BENCH", "SEED_BENCH_TILT",
-                 "SEED_CLEAN"):  # fmt: skip
+                 "SEED_CLEAN", "SEED_CLEAN_RETRACE", "SEED_CLEAN_TILT"):  # fmt: skip
         g[name] += shift
     for key in SEEDS:
         SEEDS[key] += shift
@@ -816,12 +854,12 @@ def main() -> None:
     afm: dict[str, Any] = {}
     if not args.no_afm:
         t2 = time.perf_counter()
-        sets = afm_sets(args.work, args.quick)
+        sets, retraces = afm_sets(args.work, args.quick)
         print(f"\nAFM sets ready in {time.perf_counter() - t2:.1f} s")
         ce = ClassicalEstimator()
         t3 = time.perf_counter()
         for name, (data, _) in sets.items():
-            afm[name] = score_afm(data, ce)
+            afm[name] = score_afm(data, ce, retraces.get(name))
         print_afm(afm)
         print(f"  (estimated in {time.perf_counter() - t3:.1f} s)")
     total = time.perf_counter() - t0

@@ -14,8 +14,10 @@ from stickslip.estimators.pairs import (
     PAIR_COLUMNS,
     add_pair_columns,
     find_pairs,
+    offset_free_pairs,
     pair_friction,
     pair_parameters,
+    shared_offset,
 )
 from stickslip.traces.formats.common import Channel, ScanFile
 from stickslip.traces.formats.maps import friction_loop, map_to_traces
@@ -195,3 +197,54 @@ def test_map_rows_get_the_pair_parameters_on_both_rows():
         assert rows[it]["U0_pair_eV"] == rows[ir]["U0_pair_eV"]
         both = rows[it]["U0_eV"] * rows[ir]["U0_eV"]
         assert rows[it]["U0_pair_eV"] == pytest.approx(np.sqrt(both))
+
+
+def tilted_map(lines: int = 2) -> tuple[ScanFile, np.ndarray]:
+    """A map whose offset varies along x (a tilt and a curvature, the same in both
+    directions) under sawteeth of different phases; returns it and the offset (lines,
+    pixels) in physical x order."""
+    x = np.arange(PIXELS) * SIZE_NM / PIXELS
+    u = x / SIZE_NM
+    rng = np.random.default_rng(5)
+    fwd = np.stack([sawtooth(x, 0.246, 1.0, rng.random()) for _ in range(lines)])
+    bwd = np.stack([sawtooth(x, 0.246, 1.0, rng.random()) for _ in range(lines)])
+    off = np.stack([-3.0 + 4.0 * u - 2.5 * (i + 1) * u**2 for i in range(lines)])
+    trace_img = fwd + off
+    retrace_img = -bwd[:, ::-1] + off  # the backward scan's friction, stored in x order
+    scan = ScanFile(
+        path=Path("tilt.spm"), fmt="test", scan_size_nm=SIZE_NM,
+        channels=[Channel("Friction", "trace", "nN", trace_img.shape, trace_img),
+                  Channel("Friction", "retrace", "nN", retrace_img.shape, retrace_img)],
+    )  # fmt: skip
+    return scan, off
+
+
+def test_the_shared_offset_of_a_pair_is_found_along_the_line():
+    scan, off = tilted_map()
+    traces = map_to_traces(scan)
+    pairs = find_pairs(traces)
+    assert len(pairs) == 2
+    period = 0.246 / (SIZE_NM / PIXELS)
+    for it, ir in pairs:
+        o = shared_offset(traces[it].force_nN, traces[ir].force_nN, period)
+        truth = off[traces[it].meta["line"]]
+        # the sawteeth's own period means cancel; what is left is the offset (1.5-3 nN,
+        # varying by 1.6-2.6 nN along the line) to the point sampling of a sawtooth of
+        # 11.4 samples per period: within 5 % of its peak-to-peak 2 nN
+        assert np.max(np.abs(o - truth)) < 0.1
+        # one line's own level is its friction (0.4 nN here) plus the offset
+        assert abs(float(np.mean(traces[it].force_nN) - np.mean(truth))) > 0.3
+
+
+def test_offset_free_pairs_takes_the_offset_off_both_rows_and_leaves_lone_lines():
+    scan, off = tilted_map()
+    traces = map_to_traces(scan)
+    lone = Trace(traces[0].x_nm, traces[0].force_nN.copy(), "lone", "other.csv")
+    out, n = offset_free_pairs([*traces, lone], [0.246] * (len(traces) + 1))
+    assert n == 2 and out[-1] is lone
+    for t, new in zip(traces, out, strict=False):
+        line = t.meta["line"]
+        truth = off[line] if t.meta["direction"] == "trace" else -off[line][::-1]
+        # each row less its offset: a sawtooth about its friction, with no tilt left
+        resid = new.force_nN - (t.force_nN - truth)
+        assert np.max(np.abs(resid)) < 0.1

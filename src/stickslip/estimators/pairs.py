@@ -43,10 +43,21 @@ which cancels in the pair, so the fully correlated bound of the friction is too 
 here (on ``benchmarks/families.py``'s pairs of pool 601 it covered 0.984-0.995; this
 rule 0.924-0.948, and 0.919-0.948 on pools 602 and 603). The std is the log-normal's
 with the pair's 68 % interval, as the line model gives it.
+
+The offset along the line. An estimator that reads the PT parameters off the force's
+levels (the classical inversion takes F_max from the peaks) is thrown by an offset of
+the force's zero, which one line cannot tell from friction: a tilt or a curvature of
+the sample adds one, and crosstalk too. The pair can: over one lattice period both
+directions' stick-slip has the same mean (the friction), so the running mean over one
+period of their half-difference, both in the same x order, is the offset that does not
+reverse with the scan, ``o(x)`` (:func:`shared_offset`), slope and curvature included.
+:func:`offset_free_pairs` gives both rows of every pair less it (the retrace row, stored
+reversed and sign-flipped, plus it, reversed), as the classical estimator reads them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Hashable, Mapping, MutableMapping, Sequence
 from typing import Any
 
@@ -178,3 +189,86 @@ def add_pair_columns(rows: Sequence[MutableMapping[str, Any]],
             rows[i]["pair_trace"] = rows[other].get("trace")
         n += 1
     return n
+
+
+def shared_offset(trace_row: np.ndarray, retrace_row: np.ndarray,
+                  period_samples: float) -> np.ndarray:  # fmt: skip
+    """The offset the two directions of a scan line share, along the trace row.
+
+    Parameters
+    ----------
+    trace_row, retrace_row : ndarray (n,)
+        The two rows as the readers store them (the retrace reversed in x and
+        sign-flipped, so that it reads as friction in its own scan direction).
+    period_samples : float
+        Samples per lattice period.
+
+    Returns
+    -------
+    ndarray (n,)
+        ``o(x)``: the mean over exactly one period (fractional ends weighted, so that no
+        ripple of the sawtooth is left) of ``(trace(x) - retrace(x)) / 2`` with both in
+        the trace's x order, where the friction cancels; within half a period of the
+        ends, where no whole period is centred, carried on straight from the first
+        (last) period and a half. The mean of the half-difference where the line is
+        shorter than one and a half periods.
+    """
+    t = np.asarray(trace_row, float)
+    r = np.asarray(retrace_row, float)[::-1]
+    h = 0.5 * (t - r)  # (F_t - F_r) / 2 + o: the friction's period means cancel
+    n = h.size
+    P = float(period_samples)
+    if not (P > 0) or 1.5 * P >= n:
+        return np.full(n, float(np.mean(h)) if n else 0.0)
+    # the integral of the piecewise-constant h gives the mean over [c - P/2, c + P/2]
+    # for any centre c; sample centres within P/2 of an end take the straight line
+    # through the means centred at P/2 and P from that end
+    C = np.concatenate([[0.0], np.cumsum(h)])
+    grid = np.arange(n + 1.0)
+
+    def mean_at(c: np.ndarray) -> np.ndarray:
+        return (np.interp(c + P / 2, grid, C) - np.interp(c - P / 2, grid, C)) / P
+
+    c = np.arange(n) + 0.5
+    o = mean_at(np.clip(c, P / 2, n - P / 2))
+    for edge, inward in ((P / 2, 1.0), (n - P / 2, -1.0)):
+        m0, m1 = mean_at(np.array([edge, edge + inward * P / 2]))
+        out = (c - edge) * inward < 0
+        o[out] = m0 + (c[out] - edge) * (m1 - m0) / (inward * P / 2)
+    return o
+
+
+def offset_free_pairs(traces: Sequence[Trace], lattice_nm: Sequence[float]
+                      ) -> tuple[list[Trace], int]:  # fmt: skip
+    """Every trace/retrace pair (:func:`find_pairs`) less the offset it shares.
+
+    Parameters
+    ----------
+    traces : sequence of Trace
+    lattice_nm : sequence of float
+        The lattice each trace is read at (one per trace).
+
+    Returns
+    -------
+    traces : list of Trace
+        The traces, the paired ones replaced by copies less :func:`shared_offset` (the
+        retrace row plus it, reversed); others unchanged. A pair whose rows differ in
+        length or sampling is left as it is.
+    n : int
+        The number of pairs taken the offset off.
+    """
+    out = list(traces)
+    n = 0
+    for it, ir in find_pairs(out):
+        t, r = out[it], out[ir]
+        xt, xr = np.asarray(t.x_nm, float), np.asarray(r.x_nm, float)
+        if xt.size != xr.size or xt.size < 3 or not np.allclose(np.diff(xt), np.diff(xr)):
+            continue
+        dx = abs(float(xt[-1] - xt[0])) / (xt.size - 1)
+        if not dx > 0:
+            continue
+        o = shared_offset(t.force_nN, r.force_nN, float(lattice_nm[it]) / dx)
+        out[it] = dataclasses.replace(t, force_nN=np.asarray(t.force_nN, float) - o)
+        out[ir] = dataclasses.replace(r, force_nN=np.asarray(r.force_nN, float) + o[::-1])
+        n += 1
+    return out, n

@@ -223,3 +223,34 @@ def test_a_refused_two_regime_line_says_where_it_changes():
     change_at = 14 * (2.0 / 5.0 + 0.01)  # after fourteen sticks of 2/5 nm each
     assert row["change_nm"] == pytest.approx(change_at, abs=0.5)
     assert f"at x = {row['change_nm']:.2f} nm" in row["domain_reason"]
+
+
+def test_a_trace_retrace_pair_is_read_less_the_offset_it_shares():
+    """A negative offset with tilt and curvature, the same in both scan directions,
+    makes the lone line's peaks fit no PT (refused); read as a pair, it comes off and
+    both rows are answered right, their <F> still the rows' own."""
+    from stickslip.traces.trace import Trace
+
+    s = PhysicalSettings()
+    U, K = np.array([1.0, 3.0]), np.array([5.0, 20.0])
+    fwd = simulate(U, K, s, seed=1).force_nN
+    bwd = simulate(U, K, s, seed=2).force_nN
+    x = np.arange(s.pixels) * s.pixel_nm
+    u = x / x[-1]
+    traces = []
+    for i in range(U.size):
+        o = -3.0 * np.ptp(fwd[i]) * (0.5 + u + 0.8 * u**2)
+        meta = {"line": i, "lattice_nm": s.lattice_nm, "velocity_nm_per_s": 60.0}
+        traces.append(Trace(x, fwd[i] + o, f"t{i}", "map.x", {**meta, "direction": "trace"}))
+        # a retrace row as the readers store it: reversed and sign-flipped
+        traces.append(Trace(x, bwd[i] - o[::-1], f"r{i}", "map.x",
+                            {**meta, "direction": "retrace"}))  # fmt: skip
+    lone = E.ClassicalEstimator(pair_offsets=False).predict(traces).rows
+    assert all(r["quality"] == "inconsistent slopes" for r in lone[0::2])
+    paired = E.ClassicalEstimator().predict(traces)
+    assert any("2 trace/retrace pair(s)" in n for n in paired.notes)
+    for j, r in enumerate(paired.rows):
+        assert r["quality"] == "ok", r
+        assert r["K_N_m"] == pytest.approx(K[j // 2], rel=0.05)
+        assert r["U0_eV"] == pytest.approx(U[j // 2], rel=0.05)
+        assert r["F_mean_nN"] == pytest.approx(float(np.mean(traces[j].force_nN)))

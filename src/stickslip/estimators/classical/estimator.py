@@ -27,6 +27,14 @@ the line's K: no one spring fits them; or the slip levels show a baseline left i
 sticks, :data:`LEVEL_AGREEMENT`); ``two regimes`` (the sticks' slope changes part-way:
 a tip that changed); ``alternating slips`` (slips of two sizes take turns: more than
 one contact). Every flag but ``ok`` comes without K.
+
+Both directions of a map line (a trace/retrace pair,
+:func:`~stickslip.estimators.pairs.find_pairs`) are read less the offset of the force's
+zero that they share (:func:`~stickslip.estimators.pairs.offset_free_pairs`: a tilt,
+curvature or crosstalk that does not reverse with the scan), which the inversion would
+read as another F_max; their ``F_mean_nN`` stays the row's own mean, so that the pair's
+``offset_pair_nN`` still says how large the offset was. A lone line keeps its offset:
+one line cannot tell it from friction.
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
 from stickslip.conditions import GRAPHITE, GRAPHITE_LATTICE_NM, Conditions, Reference
 from stickslip.estimators.base import TraceEstimator, in_volts
 from stickslip.estimators.classical.pt_inversion import invert, k_from_segment, median_k
+from stickslip.estimators.pairs import offset_free_pairs
 from stickslip.estimators.table import TWO_REGIMES as TWO_REGIMES_QUALITY
 from stickslip.robust import mad_sigma, median, percentile
 from stickslip.units import EV_TO_NN_NM
@@ -514,10 +523,12 @@ class ClassicalEstimator(TraceEstimator):
     accepts_volts = True  # slopes and peaks scale with the force unit: estimates in V units
 
     def __init__(self, mass_kg: float = PAPER_MASS_KG, damping_per_s: float = PAPER_DAMPING_PER_S,
-                 reference: Reference = GRAPHITE) -> None:  # fmt: skip
+                 reference: Reference = GRAPHITE, pair_offsets: bool = True) -> None:  # fmt: skip
         self.mass_kg = mass_kg
         self.damping_per_s = damping_per_s
         self.reference = reference
+        #: read trace/retrace pairs less the offset they share (module docstring)
+        self.pair_offsets = pair_offsets
 
     def describe(self) -> str:
         return "classical slip-detection estimator with the finite-temperature PT inversion"
@@ -526,21 +537,29 @@ class ClassicalEstimator(TraceEstimator):
                  ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
         # the thermal correction compares energies with kT: not possible in volts
         volts = np.array([in_volts(t) for t in traces], dtype=bool)
+        read, n_pairs = (offset_free_pairs(traces, [c.lattice_nm for c in conditions])
+                         if self.pair_offsets else (list(traces), 0))  # fmt: skip
         table = estimate_array(
-            [t.x_nm for t in traces], [t.force_nN for t in traces],
+            [t.x_nm for t in read], [t.force_nN for t in read],
             np.array([c.lattice_nm for c in conditions]),
             np.where(volts, 0.0, [c.temperature_K for c in conditions]),
             np.array([c.velocity_nm_per_s for c in conditions]),
             mass_kg=self.mass_kg, damping_per_s=self.damping_per_s,
         )  # fmt: skip
         out: list[dict[str, Any] | str] = []
-        for t, row in zip(traces, table, strict=True):
+        for t, r, row in zip(traces, read, table, strict=True):
             d = _to_estimate(t.name, row, {}).as_dict()
             res = {k: d[k] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta", "quality")}
             res.update({f"{k}_std": d[f"{k}_std"] for k in ("F_mean_nN", "U0_eV", "K_N_m", "eta")})
             res.update({k: d[k] for k in CLASSICAL_COLUMNS})
+            if r is not t:  # read less its pair's offset: <F> stays the row's own
+                res["F_mean_nN"] = float(np.mean(t.force_nN))
             out.append(res)
         notes = []
+        if n_pairs:
+            notes.append(f"classical: {n_pairs} trace/retrace pair(s) read less the offset "
+                         "both directions share (the mean over one lattice period of their "
+                         "half-difference)")  # fmt: skip
         if volts.any():
             notes.append(f"{int(volts.sum())} trace(s) in volts (no --calibration): <F>, U0 "
                          "and K in V, V nm and V/nm, without the thermal correction of the "
