@@ -28,11 +28,21 @@ spike burst on a line). Per-line estimates: the bundled line model (``load_estim
 as ``infer``), with the domain verdict. sigma_sys is calibrated on the calibration set
 (seed 4211: coverage 0.95 of the pooled 95 % interval, per target and per one/both
 directions) and written to ``src/stickslip/resources/map_pooling.json`` with ``--write``;
-so is each evidence's flag threshold (``evidence_z``: the robust score of a line's
-``evidence_slow`` / ``evidence_spikes`` against its map's own lines that about
-``EVIDENCE_RATE`` of the calibration set's lines exceed, a line counted once for both
-directions). Every figure below is scored on the scoring set (seed 4223; ``--seed``
-scores on another, for development runs that must not tune on 4223).
+so is each evidence's flag threshold (``evidence_z``: per evidence of
+``pooling.JUDGED_EVIDENCE``, ``evidence_slow`` / ``evidence_spikes`` / ``evidence_local``,
+the robust score of a line against its map's usable lines, at one common quantile chosen
+so that ``EVIDENCE_RATE`` of the calibration set's lines exceed at least one, a line
+counted once for both directions and whether or not its estimate is usable). Every
+figure below is scored on the scoring set (seed 4223; ``--seed`` scores on another: a
+fresh seed for a held-out scoring, or a development seed that must not be the scoring
+set).
+
+Outlier lines: a defect line is one clean line of the parameter point simulated over
+two Gaussian defects (barrier +100 % of U0, 0.6 nm wide, at 5-11 nm of the substrate),
+put at the same line in both directions (the same clean force in trace and retrace);
+a spike burst adds 8 spikes of 2-4 nN, 1-3 pixels wide, to a line in both directions.
+A line counts as flagged where either direction's row is flagged (by its estimates or
+by its evidence, also where the row is out of domain).
 
 Usage: NUMBA_NUM_THREADS=1 python benchmarks/map_pooling.py [--maps 300] [--cal-maps 150]
        [--work build/map_pooling] [--seed 4223] [--write]
