@@ -262,7 +262,7 @@ def test_a_homogeneous_map_flags_nothing_by_evidence():
         res = pl.pool_groups(_map_rows(n=128, seed=seed, evidence={}), CAL_E)
         assert set(res.reasons.values()) <= {pl.OUTLIER_REASON}
     # the default thresholds are set for a small share of normal lines (calibrated on
-    # simulated maps at 0.5 % per evidence): on Gaussian groups they pass about that
+    # simulated maps at 1 % for the three together): on Gaussian groups they pass less
     rng = np.random.default_rng(4262)
     rate = np.mean([pl.flag_evidence(rng.normal(0, 1, (128, len(pl.JUDGED_EVIDENCE))),
                                      pl.PoolingCalibration().evidence_threshold()).any(axis=1)
