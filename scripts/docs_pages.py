@@ -82,6 +82,10 @@ OTHER_COLUMNS = {
                      "std; dimensionless",
     "evidence_spikes": "line model: what the line shows of spikes: ln of its largest second "
                        "difference over their robust scale (MAD); dimensionless",
+    "evidence_local": "line model: what the line shows of a local anomaly (a defect): ln of "
+                      "the largest response of its slow residual to a filter a few lattice "
+                      "periods wide that answers to a localised bump and not to an offset, "
+                      "a slope or a curvature, over the profile's std; dimensionless",
     "map_reason": "why a map line was left out of its map's pooled answer (inconsistent "
                   "with its map, or showing what its other lines do not)",
     "n_windows": "window MLP: number of windows", "F_mean_net": "window MLP: the network's ⟨F⟩",

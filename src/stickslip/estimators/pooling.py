@@ -54,14 +54,19 @@ Lines that break the pattern
 - *Lines that show what the rest of their map does not*: a line crossing a strong
   defect or carrying a spike burst hardly moves its estimate (the line model is robust to
   both), so the estimates cannot find it; what the line shows can. Each row's evidence
-  (``evidence_slow``, ``evidence_spikes``: :mod:`stickslip.estimators.evidence`,
-  dimensionless, written by the line model) is scored against the group's own evidence,
-  ``(e_i - median) / (1.4826 MAD)`` over the usable lines (:func:`evidence_scores`), and a
-  line whose score exceeds :attr:`PoolingCalibration.evidence_z` is flagged with a reason
-  naming what it shows and left out of the pool (before the estimates are judged, so it
-  widens nothing). The scale is the map's own, so no scale in nN or nm enters; rows
-  without the columns (other estimators, older tables) are judged by their estimates
-  only.
+  (``evidence_slow``, ``evidence_spikes``, ``evidence_local``:
+  :mod:`stickslip.estimators.evidence`, dimensionless, written by the line model;
+  :data:`JUDGED_EVIDENCE`) is scored against the group's own evidence,
+  ``(e_i - median) / (1.4826 MAD)`` with the median and MAD of the usable lines
+  (:func:`evidence_scores`), and a line whose score exceeds
+  :attr:`PoolingCalibration.evidence_z` is flagged with a reason naming what it shows
+  and left out of the pool (before the estimates are judged, so it widens nothing). Every
+  line with evidence is scored, also one without a usable estimate (out of domain,
+  refused): it is left out of the pool in any case, and its reason says what it shows.
+  ``local`` answers to a defect (a few cycles whose level differs from their
+  neighbours'), which ``slow`` cannot tell from the drift and crosstalk of normal lines.
+  The scale is the map's own, so no scale in nN or nm enters; rows without the columns
+  (other estimators, older tables) are judged by their estimates only.
 - *A change along the slow scan axis* (a tip change, a domain of another material from
   some line on): a two-segment Gaussian mean-shift model on the lines' estimates in
   line order (ln U0, ln K, <F> relative to its median; winsorised at 4 robust standard deviations),
@@ -91,7 +96,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS
+from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS, LOCAL, LOCAL_COLUMN
 
 #: Pooled targets and whether each is pooled on a log scale.
 POOL_TARGETS: dict[str, bool] = {"F_mean_nN": False, "U0_eV": True, "K_N_m": True, "eta": True}
@@ -104,14 +109,22 @@ CHI2_1_MEDIAN = float(stats.chi2.ppf(0.5, 1))
 MIN_BIRGE_LINES = 32
 CALIBRATION_FILE = "map_pooling.json"
 OUTLIER_REASON = "inconsistent with its map: outside the map's predictive interval"
+#: The evidences a map's lines are judged by, and the result table's columns that carry
+#: them: those the line model's calibration reads
+#: (:data:`~stickslip.estimators.evidence.EVIDENCE`) and the local anomaly
+#: (:func:`~stickslip.estimators.evidence.local_evidence`).
+JUDGED_EVIDENCE = (*EVIDENCE, LOCAL)
+JUDGED_EVIDENCE_COLUMNS = (*EVIDENCE_COLUMNS, LOCAL_COLUMN)
 #: What each evidence says a line shows, in the reason of a line flagged for it.
-EVIDENCE_TEXT = {"slow": "slow, non-periodic content (a defect or a step)", "spikes": "spikes"}
+EVIDENCE_TEXT = {"slow": "slow, non-periodic content (a drift or a step)", "spikes": "spikes",
+                 LOCAL: "a local anomaly of a few stick-slip cycles (a defect)"}
 EVIDENCE_REASON = "shows what the other lines of its map do not: "
 #: Robust score above which a line is flagged for an evidence, where the calibration
-#: file names none: what 0.5 % of the lines of seed 4211's homogeneous maps exceed
-#: (``benchmarks/map_pooling.py``, 40 maps). The spikes' scores have a long tail (a
-#: line's noise, drawn per line, sets how far its slips stand out of it).
-DEFAULT_EVIDENCE_Z = {"slow": 3.1, "spikes": 7.3}
+#: file names none: each evidence's quantile, one for all, at which 1 % of the lines of
+#: seed 4211's 120 homogeneous maps exceed at least one (``benchmarks/map_pooling.py``).
+#: The spikes' scores have a long tail (a line's noise, drawn per line, sets how far its
+#: slips stand out of it).
+DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.95, LOCAL: 3.09}
 #: Fewest lines with evidence whose median and MAD may judge one of them.
 MIN_EVIDENCE_LINES = 8
 #: Least robust scale of an evidence (ln units, dimensionless): lines that agree closer
@@ -154,7 +167,7 @@ class PoolingCalibration:
         ln U0, ln K or <F> relative to its median (0.1: 10 %); a smaller shift on a
         large map is significant but no change of contact.
     evidence_z : dict of str to float
-        Per evidence (:data:`~stickslip.estimators.evidence.EVIDENCE`), the robust score
+        Per evidence (:data:`JUDGED_EVIDENCE`), the robust score
         (:func:`evidence_scores`) above which a line is flagged as showing what the other
         lines of its map do not; chosen on the calibration maps so that few normal lines
         pass it. Missing names take :data:`DEFAULT_EVIDENCE_Z`.
@@ -177,8 +190,9 @@ class PoolingCalibration:
         return float(table.get(key, 0.0))
 
     def evidence_threshold(self) -> np.ndarray:
-        """:attr:`evidence_z` in the order of :data:`~stickslip.estimators.evidence.EVIDENCE`."""
-        return np.array([float(self.evidence_z.get(k, DEFAULT_EVIDENCE_Z[k])) for k in EVIDENCE])
+        """:attr:`evidence_z` in the order of :data:`JUDGED_EVIDENCE`."""
+        return np.array([float(self.evidence_z.get(k, DEFAULT_EVIDENCE_Z[k]))
+                         for k in JUDGED_EVIDENCE])  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -414,52 +428,60 @@ def flag_outliers(Y: np.ndarray, V: np.ndarray, z: float, max_iter: int = 10) ->
 # ---------------------------------------------------------------------------- evidence
 
 
-def evidence_scores(E: np.ndarray) -> np.ndarray:
+def evidence_scores(E: np.ndarray, reference: np.ndarray | None = None) -> np.ndarray:
     """Each line's evidence against its group's own: ``(e - median) / (1.4826 MAD)``.
 
     Parameters
     ----------
     E : ndarray (n, p)
         The group's lines' evidence (NaN: none).
+    reference : ndarray (n,) of bool, optional
+        The lines whose median and MAD judge every line (the map's usable lines, so
+        that lines without a usable estimate are judged by the same yardstick and do
+        not move it); default all.
 
     Returns
     -------
     ndarray (n, p)
-        Robust scores, per column from the lines with a finite value (the MAD floored at
-        :data:`EVIDENCE_SCALE_FLOOR`); NaN where a line has no evidence or the column
-        fewer than :data:`MIN_EVIDENCE_LINES` lines.
+        Robust scores, per column from the reference lines with a finite value (the MAD
+        floored at :data:`EVIDENCE_SCALE_FLOOR`); NaN where a line has no evidence or
+        the column fewer than :data:`MIN_EVIDENCE_LINES` reference lines.
     """
     E = np.atleast_2d(np.asarray(E, float))
+    ref = np.ones(E.shape[0], bool) if reference is None else np.asarray(reference, bool)
     out = np.full(E.shape, np.nan)
     for j in range(E.shape[1]):
         ok = np.isfinite(E[:, j])
-        if ok.sum() < MIN_EVIDENCE_LINES:
+        base = E[ok & ref, j]
+        if base.size < MIN_EVIDENCE_LINES:
             continue
-        med = float(np.median(E[ok, j]))
+        med = float(np.median(base))
         # the group's own scale, so a noisier map is judged by its own spread
-        s = max(1.4826 * float(np.median(np.abs(E[ok, j] - med))), EVIDENCE_SCALE_FLOOR)
+        s = max(1.4826 * float(np.median(np.abs(base - med))), EVIDENCE_SCALE_FLOOR)
         out[ok, j] = (E[ok, j] - med) / s
     return out
 
 
-def flag_evidence(E: np.ndarray, z: Sequence[float]) -> np.ndarray:
+def flag_evidence(E: np.ndarray, z: Sequence[float],
+                  reference: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """Lines that show more of an evidence than their group: score above ``z`` (one per
-    column of ``E``). Only excess counts (a line that shows less is cleaner, not odd).
+    column of ``E``; scores by :func:`evidence_scores` against the ``reference`` lines).
+    Only excess counts (a line that shows less is cleaner, not odd).
 
     Returns
     -------
     ndarray (n, p) of bool
     """
-    S = evidence_scores(E)
+    S = evidence_scores(E, reference)
     with np.errstate(invalid="ignore"):
         return np.isfinite(S) & (S > np.asarray(z, float)[None, :])
 
 
 def evidence_reason(shown: Sequence[bool]) -> str:
     """The reason of a line flagged for the evidence ``shown`` (bool per
-    :data:`~stickslip.estimators.evidence.EVIDENCE`)."""
+    :data:`JUDGED_EVIDENCE`)."""
     return EVIDENCE_REASON + " and ".join(
-        EVIDENCE_TEXT[k] for k, on in zip(EVIDENCE, shown, strict=True) if on)
+        EVIDENCE_TEXT[k] for k, on in zip(JUDGED_EVIDENCE, shown, strict=True) if on)
 
 
 # ---------------------------------------------------------------------------- change point
@@ -610,7 +632,7 @@ class _Lines:
     y: dict[str, np.ndarray]
     v: dict[str, np.ndarray]
     usable: np.ndarray
-    e: np.ndarray  # (n, len(EVIDENCE)) the rows' evidence, NaN where a row has none
+    e: np.ndarray  # (n, len(JUDGED_EVIDENCE)) the rows' evidence, NaN where a row has none
 
     def take(self, sel: np.ndarray) -> _Lines:
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
@@ -629,9 +651,9 @@ def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
     usable = np.array([_usable(r) for r in sub], bool)
     for key in JUDGED:
         usable &= np.isfinite(y[key]) & np.isfinite(v[key])
-    e = np.array([[_num(r.get(c)) for c in EVIDENCE_COLUMNS] for r in sub], float)
+    e = np.array([[_num(r.get(c)) for c in JUDGED_EVIDENCE_COLUMNS] for r in sub], float)
     return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable,
-                  e.reshape(len(sub), len(EVIDENCE_COLUMNS)))  # fmt: skip
+                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -686,17 +708,18 @@ def _target_columns(key: str, p: TargetPool, log: bool) -> dict[str, float]:
 
 def _judge(lines: _Lines, cal: PoolingCalibration) -> np.ndarray:
     """Why each line is flagged (object array of str over all lines; "" where it is not):
-    usable lines that show what the others do not, then, among the rest, lines whose
-    estimates are outside the predictive interval."""
+    lines that show what the others do not (every line with evidence, scored against
+    the usable lines: a line out of domain that shows spikes says so), then, among the
+    other usable lines, lines whose estimates are outside the predictive interval."""
     why = np.full(lines.index.size, "", object)
-    sel = np.flatnonzero(lines.usable)
-    if sel.size:
-        shown = flag_evidence(lines.e[sel], cal.evidence_threshold())
+    odd = np.zeros(lines.index.size, bool)
+    if lines.usable.any():
+        shown = flag_evidence(lines.e, cal.evidence_threshold(), lines.usable)
         odd = shown.any(axis=1)
-        for i, s in zip(sel[odd], shown[odd], strict=True):
-            why[i] = evidence_reason(s)
-        # judged without them: a defect line must not widen tau for the others
-        sel = sel[~odd]
+        for i in np.flatnonzero(odd):
+            why[i] = evidence_reason(shown[i])
+    # judged without them: a defect line must not widen tau for the others
+    sel = np.flatnonzero(lines.usable & ~odd)
     if sel.size:
         Y = np.column_stack([lines.y[k][sel] for k in JUDGED])
         V = np.column_stack([lines.v[k][sel] for k in JUDGED])
@@ -851,22 +874,22 @@ def _judge_segmented(lines: _Lines, change: int, cal: PoolingCalibration) -> np.
 
 
 def evidence_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, np.ndarray]:
-    """Each usable map line's evidence scores (:func:`evidence_scores`) against the other
-    usable lines of its map and direction (no change point split): row index -> (p,).
+    """Each map line's evidence scores (:func:`evidence_scores`, columns
+    :data:`JUDGED_EVIDENCE`) against the usable lines of its map and direction (no
+    change point split), as :func:`pool_groups` judges them: row index -> (p,).
 
     What :attr:`PoolingCalibration.evidence_z` is chosen on (``benchmarks/map_pooling.py``
     takes a high quantile over the lines of homogeneous maps). Rows without evidence get
-    NaN scores.
+    NaN scores; so do all the rows of a map direction without usable lines.
     """
     out: dict[int, np.ndarray] = {}
     for idx in map_keys(rows).values():
         for d in DIRECTIONS:
             lines = _lines(rows, [i for i in idx if rows[i].get("direction") == d])
-            sel = np.flatnonzero(lines.usable)
-            if not sel.size:
+            if not lines.usable.any():
                 continue
-            S = evidence_scores(lines.e[sel])
-            for i, s in zip(lines.index[sel], S, strict=True):
+            S = evidence_scores(lines.e, lines.usable)
+            for i, s in zip(lines.index, S, strict=True):
                 out[int(i)] = s
     return out
 

@@ -52,7 +52,7 @@ from stickslip.estimators.calibration import (
     gaussian_z,
     lognormal_std,
 )
-from stickslip.estimators.evidence import line_evidence, line_evidence_batch
+from stickslip.estimators.evidence import line_evidence, line_evidence_batch, local_evidence
 from stickslip.estimators.mapping import to_reference
 from stickslip.estimators.offsets import (
     CompressionPrior,
@@ -535,6 +535,9 @@ class LinePrediction:
     #: what each mapped line shows of visible effects, (N, len(EVIDENCE))
     #: (:func:`~stickslip.estimators.evidence.line_evidence`)
     evidence: np.ndarray | None = None
+    #: what each mapped line shows of a local anomaly (a defect), (N,)
+    #: (:func:`~stickslip.estimators.evidence.local_evidence`; not read by the calibration)
+    local_evidence: np.ndarray | None = None
 
 
 def predict_std_lines(ens: LineEnsemble, lines: list[np.ndarray], cond: torch.Tensor,
@@ -598,7 +601,9 @@ def predict_lines(
     s = a / ens.spec.lattice_nm
     shift = {"F_mean_nN": 0.0, "U0_eV": np.log(s), "K_N_m": -np.log(s), "eta": 0.0}
     z68, z95 = ens.z_at(0.68), ens.z_at(0.95)
-    out = LinePrediction({}, {}, {}, {}, {}, {}, features=feats, evidence=evidence)
+    out = LinePrediction({}, {}, {}, {}, {}, {}, features=feats, evidence=evidence,
+                         local_evidence=local_evidence(lines, ens.spec.lattice_nm
+                                                       / ens.spec.pixel_nm))  # fmt: skip
     for j, name in enumerate(("F_mean_nN", "U0_eV", "K_N_m", "eta")):
         m, h68, h95 = mu[:, j], z68[j] * sd[:, j], z95[j] * sd[:, j]
         e = h68 / Z68  # std of the Gaussian with this 68 % interval

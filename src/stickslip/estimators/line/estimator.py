@@ -19,7 +19,7 @@ from stickslip.estimators.classical.estimator import (
     estimate_array,
 )
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
-from stickslip.estimators.evidence import EVIDENCE_COLUMNS
+from stickslip.estimators.evidence import EVIDENCE_COLUMNS, LOCAL_COLUMN
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
@@ -65,11 +65,12 @@ class LineEstimator(TraceEstimator):
 
     Per trace: ``F_mean_nN, U0_eV, K_N_m, eta``, ``*_std`` (the std of the Gaussian, or
     log-normal, with the same 68 % interval), the central 68 % / 95 % intervals, and what
-    the line shows of visible effects (:data:`EVIDENCE_COLUMNS`, read by the per-map
-    pooling to find lines unlike the rest of their map). The lattice and the velocity of
-    each trace enter the mapping and the network's conditioning, and so does its
-    temperature for a model trained over a range of them (a note says when a trace's
-    temperature lies outside what the model was trained at).
+    the line shows of visible effects (:data:`EVIDENCE_COLUMNS`) and of a local anomaly
+    (:data:`LOCAL_COLUMN`), read by the per-map pooling to find lines unlike the rest of
+    their map. The lattice and the velocity of each trace enter the mapping and the
+    network's conditioning, and so does its temperature for a model trained over a range
+    of them (a note says when a trace's temperature lies outside what the model was
+    trained at).
     """
 
     kind = "line"
@@ -134,6 +135,8 @@ class LineEstimator(TraceEstimator):
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
             row.update(zip(EVIDENCE_COLUMNS, map(float, pred.evidence[j]), strict=True))
+            if pred.local_evidence is not None:
+                row[LOCAL_COLUMN] = float(pred.local_evidence[j])
             out[i] = row
         if self.domain_verdict:
             self._check_stick_slip(traces, conditions, out)
