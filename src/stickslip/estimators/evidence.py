@@ -38,6 +38,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from stickslip.estimators.periodic import sliding_period_mean
+
 #: The evidence's names, in the order of :func:`line_evidence`'s columns.
 EVIDENCE = ("slow", "spikes")
 #: The result table's columns that carry a line's evidence (the line model writes them;
@@ -100,14 +102,21 @@ def line_evidence(lines: list[np.ndarray] | np.ndarray, period_px: float) -> np.
     ndarray (B, len(EVIDENCE))
         Zeros for a line shorter than two periods (nothing to compare).
     """
+    return _by_length(lines, period_px, _batch, (len(EVIDENCE),))
+
+
+def _by_length(lines: list[np.ndarray] | np.ndarray, period_px: float, batch,
+               shape: tuple[int, ...]) -> np.ndarray:  # fmt: skip
+    """``batch`` (of B lines of one length, and ``period_px``) over lines of any lengths,
+    each length at once; zeros (of ``shape`` per line) for lines of two periods or less."""
     arrays = [np.asarray(f, float) for f in lines]
-    out = np.zeros((len(arrays), len(EVIDENCE)))
+    out = np.zeros((len(arrays), *shape))
     sizes = np.array([f.size for f in arrays], int)
     for size in np.unique(sizes):
         if size <= 2 * period_px:
             continue
         idx = np.flatnonzero(sizes == size)
-        out[idx] = _batch(np.stack([arrays[i] for i in idx]), period_px)
+        out[idx] = batch(np.stack([arrays[i] for i in idx]), period_px)
     return out
 
 
@@ -181,26 +190,11 @@ def _edge_kernels(sigma_px: float, length: int, edge: float) -> np.ndarray:
     return out
 
 
-def _period_mean(F: np.ndarray, period_px: float) -> np.ndarray:
-    """The mean of B series (B, L) over a sliding window of exactly one lattice period
-    (``period_px`` samples, the last one weighted by its fraction), (B, L - ceil(p) + 1):
-    a lattice-periodic pattern leaves it constant, whatever its shape."""
-    B, n = F.shape
-    w = int(np.floor(period_px))
-    frac = period_px - w
-    cs = np.concatenate([np.zeros((B, 1)), np.cumsum(F, axis=1)], axis=1)
-    m = n - w - (1 if frac > 0 else 0) + 1
-    total = cs[:, w : w + m] - cs[:, :m]
-    if frac > 0:
-        total = total + frac * F[:, w : w + m]
-    return total / period_px
-
-
 def _local_batch(F: np.ndarray, period_px: float) -> np.ndarray:
     """:func:`local_evidence` of B lines of one length, (B,)."""
     from scipy.signal import fftconvolve
 
-    level = _period_mean(F, period_px)
+    level = sliding_period_mean(F, period_px)
     profile_std = _profile(F, period_px)[0].std(axis=1)
     sigma = LOCAL_SCALE * period_px
     n = level.shape[1]
@@ -246,12 +240,4 @@ def local_evidence(lines: list[np.ndarray] | np.ndarray, period_px: float) -> np
     ndarray (B,)
         Zeros for a line shorter than two periods (nothing to compare).
     """
-    arrays = [np.asarray(f, float) for f in lines]
-    out = np.zeros(len(arrays))
-    sizes = np.array([f.size for f in arrays], int)
-    for size in np.unique(sizes):
-        if size <= 2 * period_px:
-            continue
-        idx = np.flatnonzero(sizes == size)
-        out[idx] = _local_batch(np.stack([arrays[i] for i in idx]), period_px)
-    return out
+    return _by_length(lines, period_px, _local_batch, ())

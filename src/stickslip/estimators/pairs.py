@@ -64,6 +64,7 @@ from typing import Any
 import numpy as np
 
 from stickslip.estimators.calibration import Z68, Z95, lognormal_std
+from stickslip.estimators.periodic import period_means
 from stickslip.estimators.table import BOUNDS, is_missing
 from stickslip.traces.formats.common import RETRACE, TRACE
 from stickslip.traces.trace import Trace
@@ -206,12 +207,12 @@ def shared_offset(trace_row: np.ndarray, retrace_row: np.ndarray,
     Returns
     -------
     ndarray (n,)
-        ``o(x)``: the mean over exactly one period (fractional ends weighted, so that no
-        ripple of the sawtooth is left) of ``(trace(x) - retrace(x)) / 2`` with both in
-        the trace's x order, where the friction cancels; within half a period of the
-        ends, where no whole period is centred, carried on straight from the first
-        (last) period and a half. The mean of the half-difference where the line is
-        shorter than one and a half periods.
+        ``o(x)``: the mean over exactly one period (fractional ends weighted,
+        :func:`~stickslip.estimators.periodic.period_means`) of ``(trace(x) -
+        retrace(x)) / 2`` with both in the trace's x order, where the friction
+        cancels; within half a period of the ends, where no whole period is centred,
+        carried on straight from the first (last) period and a half. The mean of the
+        half-difference where the line is shorter than one and a half periods.
     """
     t = np.asarray(trace_row, float)
     r = np.asarray(retrace_row, float)[::-1]
@@ -220,14 +221,11 @@ def shared_offset(trace_row: np.ndarray, retrace_row: np.ndarray,
     P = float(period_samples)
     if not (P > 0) or 1.5 * P >= n:
         return np.full(n, float(np.mean(h)) if n else 0.0)
-    # the integral of the piecewise-constant h gives the mean over [c - P/2, c + P/2]
-    # for any centre c; sample centres within P/2 of an end take the straight line
-    # through the means centred at P/2 and P from that end
-    C = np.concatenate([[0.0], np.cumsum(h)])
-    grid = np.arange(n + 1.0)
+    # the mean over [c - P/2, c + P/2] of sample centres c; those within P/2 of an end
+    # take the straight line through the means centred at P/2 and P from that end
 
     def mean_at(c: np.ndarray) -> np.ndarray:
-        return (np.interp(c + P / 2, grid, C) - np.interp(c - P / 2, grid, C)) / P
+        return period_means(h, P, np.asarray(c, float) - P / 2)
 
     c = np.arange(n) + 0.5
     o = mean_at(np.clip(c, P / 2, n - P / 2))
