@@ -75,6 +75,9 @@ CAL_SEED, SCORE_SEED = 4211, 4223
 SIZES = np.array([32, 64, 128, 256, 512])
 SIZE_WEIGHTS = np.array([0.25, 0.3, 0.25, 0.12, 0.08])
 N_POINTS, POOL, PARTNER_POOL, SMOOTH_POOL, DEFECT_POOL = 6, 128, 64, 96, 8
+#: The defect lines' cache (trace and mirrored retrace; v2: before, the retrace was the
+#: trace's own array, so an older cache holds no retrace).
+DEFECT_CACHE = "defects_v2_{seed}.npz"
 KINDS = ("homogeneous", "tip", "domain", "smooth", "outliers")
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m")
 V0, T0, A = 60.0, 296.0, 0.246
@@ -82,6 +85,12 @@ V0, T0, A = 60.0, 296.0, 0.246
 #: evidence's threshold at one common quantile): with the estimate flags (about 0.8 %)
 #: they stay within the target of 2 % of normal lines.
 EVIDENCE_RATE = 0.01
+#: The evidences a line is scored by: each of ``pooling.JUDGED_EVIDENCE`` (the larger
+#: score of the line's two directions) and the paired local score (``local_both``).
+EVIDENCE_COLUMNS = (*pl.JUDGED_EVIDENCE, pl.LOCAL_BOTH)
+#: Those that judge a line seen in both directions (all the benchmark's lines): the
+#: budget ``EVIDENCE_RATE`` is shared among them.
+UNION = ("slow", "spikes", pl.LOCAL_BOTH)
 
 
 # ---------------------------------------------------------------------------- line pools
@@ -120,7 +129,8 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
                       seed + 1).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
     out["domain"] = _sim(rep(pts[:, 0], PARTNER_POOL), rep(pts[:, 1] * kf, PARTNER_POOL),
                          seed + 2).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
-    # defect lines: a strong Gaussian defect (barrier +100 % of U0, 0.6 nm wide) mid-line
+    # defect lines, trace only (the cache's format of old; :func:`defect_pools` replaces
+    # them by trace and mirrored retrace; the draw keeps the smooth phases below)
     n = N_POINTS * DEFECT_POOL
     xs = rng.uniform(3.0, 9.0, (n, 2)) + 2.0
     defects = (xs, np.full((n, 2), 1.0), np.full((n, 2), 0.6))
@@ -139,6 +149,51 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
     work.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
     return out
+
+
+def _defect_positions(seed: int) -> np.ndarray:
+    """(N_POINTS * DEFECT_POOL, 2) substrate positions of the defect lines' two defects,
+    nm: 5-11 nm of the substrate (the recorded window starts at the warm-up, 1-2 nm)."""
+    rng = np.random.default_rng([seed, 2])
+    rng.choice([1.4, 0.7], N_POINTS)  # the partners' factors come first (as in pools)
+    rng.choice([1.4, 0.65], N_POINTS)
+    return rng.uniform(3.0, 9.0, (N_POINTS * DEFECT_POOL, 2)) + 2.0
+
+
+def defect_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
+    """The defect lines of the set, trace and retrace (cached in ``work`` under
+    :data:`DEFECT_CACHE`): each line simulated twice over the same two defects, the trace
+    forward (seed + 3) and the retrace over the mirrored substrate with its own thermal
+    noise (seed + 5), so that its row reads in its own scan direction as a reader stores
+    it (reversed in x, sign-flipped): the defect at physical position ``x`` of the
+    trace's window ``[X0, X0 + L]`` sits at ``2 X0 + L - x``."""
+    path = work / DEFECT_CACHE.format(seed=seed)
+    if path.exists():
+        return dict(np.load(path))
+    pts = _points(seed)
+    U0, K = np.repeat(pts[:, 0], DEFECT_POOL), np.repeat(pts[:, 1], DEFECT_POOL)
+    xs = _defect_positions(seed)
+    height, width = np.full(xs.shape, 1.0), np.full(xs.shape, 0.6)
+    s = PhysicalSettings()
+    t0 = time.time()
+    trace = simulate(U0, K, s, seed=seed + 3, defects=(xs, height, width))
+    X0 = trace.support_nm[:, 0] - 0.5 * s.pixel_nm  # support at the window's start
+    mirrored = 2.0 * X0[:, None] + s.length_nm - xs
+    retrace = simulate(U0, K, s, seed=seed + 5, defects=(mirrored, height, width))
+    out = {"defect": trace.force_nN.reshape(N_POINTS, DEFECT_POOL, -1),
+           "defect_retrace": retrace.force_nN.reshape(N_POINTS, DEFECT_POOL, -1),
+           "defect_x_nm": xs.reshape(N_POINTS, DEFECT_POOL, 2),
+           "defect_x_retrace_nm": mirrored.reshape(N_POINTS, DEFECT_POOL, 2)}  # fmt: skip
+    print(f"simulated the defect lines of seed {seed} in {time.time() - t0:.0f} s")
+    work.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **out)
+    return out
+
+
+def line_pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
+    """:func:`pools` and :func:`defect_pools` of the set together (an older pools cache's
+    ``defect`` lines, trace only, are replaced)."""
+    return {**pools(seed, work, smooth), **defect_pools(seed, work)}
 
 
 # ---------------------------------------------------------------------------- maps
@@ -235,7 +290,9 @@ def run_maps(kind: str, count: int, P: dict, seed: int, est, cal: pl.PoolingCali
             where = rng.choice(n, k, replace=False)
             outliers[where] = True
             if rng.uniform() < 0.5:
-                clean[:, where] = P["defect"][p][rng.integers(0, DEFECT_POOL, k)][None]
+                pick = rng.integers(0, DEFECT_POOL, k)
+                clean[0, where] = P["defect"][p][pick]
+                clean[1, where] = P["defect_retrace"][p][pick]
                 kind_o = "defect"
             else:
                 spikes = outliers
@@ -265,11 +322,18 @@ def run_maps(kind: str, count: int, P: dict, seed: int, est, cal: pl.PoolingCali
             rec["left_out"][table.rows[i]["line"]] = True
             rec["flagged"][table.rows[i]["line"]] = True
             rec["why"][table.rows[i]["line"]] = why
-        # each line's evidence scores against its map, the larger of its two directions'
-        rec["evidence"] = np.full((n, len(pl.JUDGED_EVIDENCE)), -np.inf)
+        # each line's evidence scores against its map, the larger of its two directions',
+        # and its paired local score (both directions together; EVIDENCE_COLUMNS); and
+        # each row's own local score (the one-direction rule's yardstick)
+        rec["evidence"] = np.full((n, len(EVIDENCE_COLUMNS)), -np.inf)
+        rec["local_rows"] = []
+        j_local = pl.JUDGED_EVIDENCE.index(pl.LOCAL)
         for i, sc in pl.evidence_scores_by_row(table.rows).items():
             ln = table.rows[i]["line"]
-            rec["evidence"][ln] = np.fmax(rec["evidence"][ln], sc)
+            rec["evidence"][ln, :-1] = np.fmax(rec["evidence"][ln, :-1], sc)
+            rec["local_rows"].append(sc[j_local])
+        for i, z in pl.paired_scores_by_row(table.rows).items():
+            rec["evidence"][table.rows[i]["line"], -1] = z
         # single-line 95 % half-widths (relative for U0, K; nN for <F>)
         rec["single"] = {k: float(np.nanmedian([
             (r[f"{k}_hi95"] - r[f"{k}_lo95"]) / 2 / (r[k] if k != "F_mean_nN" else 1.0)
@@ -318,13 +382,9 @@ def calibrate(maps: list[dict], floor: float = 0.005) -> tuple[dict, dict]:
     return out["single"], out["both"]
 
 
-def evidence_thresholds(maps: list[dict], rate: float = EVIDENCE_RATE) -> dict[str, float]:
-    """Per evidence (:data:`~stickslip.estimators.pooling.JUDGED_EVIDENCE`), the robust
-    score above which a line is flagged: each evidence's ``1 - q`` quantile over the
-    lines of ``maps`` (normal lines; each counted once, by the larger score of its two
-    directions), one ``q`` for all, chosen so that a share ``rate`` of the lines exceed
-    at least one."""
-    S = np.concatenate([m["evidence"] for m in maps])
+def _union_quantile(S: np.ndarray, rate: float) -> tuple[float, np.ndarray]:
+    """The common ``q`` at which a share ``rate`` of the rows of ``S`` exceed at least one
+    column's ``1 - q`` quantile, and those quantiles."""
     cols = [S[:, j][np.isfinite(S[:, j])] for j in range(S.shape[1])]
 
     def thresholds(q: float) -> np.ndarray:
@@ -338,9 +398,43 @@ def evidence_thresholds(maps: list[dict], rate: float = EVIDENCE_RATE) -> dict[s
     for _ in range(40):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if union(mid) <= rate else (lo, mid)
-    thr = thresholds(lo)
-    return {k: round(float(t), 2) if np.isfinite(t) else pl.DEFAULT_EVIDENCE_Z[k]
-            for k, t in zip(pl.JUDGED_EVIDENCE, thr, strict=True)}  # fmt: skip
+    return lo, thresholds(lo)
+
+
+def one_direction_rule(cal_maps: list[dict], maps: list[dict], which: str,
+                       rate: float = EVIDENCE_RATE) -> float:  # fmt: skip
+    """For comparison: the share of ``which`` lines (``outliers`` or ``normal``) of ``maps``
+    flagged by the rule before the paired score (each line's slow, spikes and local
+    scores, the larger of its two directions, thresholds at one quantile calibrated on
+    ``cal_maps`` as :func:`evidence_thresholds`), or by its estimates."""
+    cols = [EVIDENCE_COLUMNS.index(k) for k in pl.JUDGED_EVIDENCE]
+    _, thr = _union_quantile(np.concatenate([m["evidence"] for m in cal_maps])[:, cols], rate)
+    hits = []
+    for m in maps:
+        with np.errstate(invalid="ignore"):
+            ev = np.any(m["evidence"][:, cols] > thr[None, :], axis=1)
+        est = np.array([w == pl.OUTLIER_REASON for w in m["why"]])
+        sel = m["outliers"] if which == "outliers" else ~m["outliers"]
+        hits.extend((ev | est)[sel].tolist())
+    return float(np.mean(hits)) if hits else math.nan
+
+
+def evidence_thresholds(maps: list[dict], rate: float = EVIDENCE_RATE) -> dict[str, float]:
+    """Per evidence (:data:`EVIDENCE_COLUMNS`), the robust score above which a line is
+    flagged: each evidence's ``1 - q`` quantile over the lines of ``maps`` (normal lines;
+    each counted once, by the larger score of its two directions, and the local anomaly
+    by its paired score, as the pooling judges a line seen in both directions), one ``q``
+    for all, chosen so that a share ``rate`` of the lines exceed at least one. The local
+    anomaly of one direction (the rule for a line seen in one) is set at the same ``q``
+    over the rows of one direction."""
+    S = np.concatenate([m["evidence"] for m in maps])
+    lo, thr = _union_quantile(S[:, [EVIDENCE_COLUMNS.index(k) for k in UNION]], rate)
+    out = dict(zip(UNION, thr, strict=True))
+    rows = np.concatenate([m["local_rows"] for m in maps]) if maps else np.array([])
+    rows = rows[np.isfinite(rows)]
+    out[pl.LOCAL] = np.quantile(rows, 1.0 - lo) if rows.size else np.inf
+    return {k: round(float(out[k]), 2) if np.isfinite(out[k]) else pl.DEFAULT_EVIDENCE_Z[k]
+            for k in EVIDENCE_COLUMNS}  # fmt: skip
 
 
 def flag_rates(maps: list[dict], which: str, target: str) -> str:
@@ -353,7 +447,7 @@ def flag_rates(maps: list[dict], which: str, target: str) -> str:
         return "no lines"
     n = len(pick)
     ev = {k: sum(1 for _, w, _ in pick if w.startswith(pl.EVIDENCE_REASON)
-                 and pl.EVIDENCE_TEXT[k] in w) / n for k in pl.JUDGED_EVIDENCE}  # fmt: skip
+                 and pl.EVIDENCE_TEXT[k] in w) / n for k in EVIDENCE_COLUMNS}  # fmt: skip
     est = sum(1 for _, w, _ in pick if w == pl.OUTLIER_REASON) / n
     out = sum(1 for *_, lo in pick if lo) / n
     return (f"{sum(f for f, *_ in pick) / n:.4f} flagged (target {target}; by evidence: "
@@ -389,7 +483,7 @@ def main() -> None:
     zero = pl.PoolingCalibration(sys_single=dict.fromkeys(pl.POOL_TARGETS, 0.0),
                                  sys_both=dict.fromkeys(pl.POOL_TARGETS, 0.0))  # fmt: skip
     # -- calibration set
-    Pc = pools(CAL_SEED, args.work, smooth=False)
+    Pc = line_pools(CAL_SEED, args.work, smooth=False)
     cal_maps = run_maps("homogeneous", args.cal_maps, Pc, CAL_SEED, est, zero)
     single, both = calibrate(cal_maps)
     evidence_z = evidence_thresholds(cal_maps)
@@ -414,7 +508,7 @@ def main() -> None:
     seed = args.seed
     if seed != SCORE_SEED:
         print(f"development run: scored on seed {seed}, not the scoring set {SCORE_SEED}")
-    P = pools(seed, args.work, smooth=True)
+    P = line_pools(seed, args.work, smooth=True)
     homo = run_maps("homogeneous", args.maps, P, seed, est, cal)
     print(f"\n== homogeneous maps (seed {seed}): {len(homo)} maps, "
           f"{sum(m['n'] for m in homo)} lines per direction")  # fmt: skip
@@ -470,6 +564,11 @@ def main() -> None:
         print(f"outlier lines ({ok}, {len(sel)} maps, {n_o} lines): "
               f"{flag_rates(sel, 'outliers', '>= 0.80')}")
         print(f"  normal lines in those maps: {flag_rates(sel, 'normal', '<= 0.02')}")
+        print(f"  for comparison, the one-direction rule (the larger of the two directions' "
+              f"local scores): {one_direction_rule(cal_maps, sel, 'outliers'):.4f} of these "
+              f"lines flagged")  # fmt: skip
+    print("  the one-direction rule on the normal lines of the homogeneous maps: "
+          f"{one_direction_rule(cal_maps, homo, 'normal'):.4f} flagged")  # fmt: skip
     # -- cost on a 512-line map
     clean = _take(P["base"][0], 512, np.random.default_rng(4290))
     traces, _ = make_map(clean, np.random.default_rng(4291), "cost.gwy",

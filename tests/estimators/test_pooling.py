@@ -230,7 +230,8 @@ def test_outliers_judged_by_the_maps_own_scatter():
 
 
 #: Thresholds at a robust 4 sigma: no normal line of :func:`_map_rows` passes them.
-CAL_E = dataclasses.replace(CAL, evidence_z={"slow": 4.0, "spikes": 4.0, "local": 4.0})
+CAL_E = dataclasses.replace(CAL, evidence_z={"slow": 4.0, "spikes": 4.0, "local": 4.0,
+                                             "local_both": 4.0})  # fmt: skip
 
 
 def test_a_line_that_shows_what_its_map_does_not_is_flagged_and_left_out():
@@ -244,7 +245,7 @@ def test_a_line_that_shows_what_its_map_does_not_is_flagged_and_left_out():
     slow = ("shows what the other lines of its map do not: slow, non-periodic content "
             "(a drift or a step)")
     local = ("shows what the other lines of its map do not: a local anomaly of a few "
-             "stick-slip cycles (a defect)")
+             "stick-slip cycles in both scan directions (a defect)")
     assert why == {"m:Lat:trace:L017": spikes, "m:Lat:retrace:L017": spikes,
                    "m:Lat:trace:L033": slow, "m:Lat:retrace:L033": slow,
                    "m:Lat:trace:L040": local, "m:Lat:retrace:L040": local}
@@ -340,3 +341,79 @@ def test_a_line_without_a_usable_estimate_is_flagged_for_what_it_shows():
         if r["line"] in (9, 12):
             r["in_domain"] = False
     assert not pl.pool_groups(plain, CAL_E).reasons
+
+
+# ---------------------------------------------------------------------------- both directions
+
+
+def _local_rows(n=64, seed=4238, excess=None, directions=("trace", "retrace")):
+    """:func:`_map_rows` with ``excess`` {(direction, line): robust sds} added to the rows'
+    local evidence (in units of the normal rows' robust sd, measured), in ``directions``."""
+    rows = [r for r in _map_rows(n=n, seed=seed, evidence={}) if r["direction"] in directions]
+    for d in directions:
+        e = np.array([r["evidence_local"] for r in rows if r["direction"] == d])
+        med = float(np.median(e))
+        sd = 1.4826 * float(np.median(np.abs(e - med)))
+        for r in rows:
+            if r["direction"] == d:
+                if (d, r["line"]) in (excess or {}):
+                    r["evidence_local"] = med + excess[(d, r["line"])] * sd
+    return rows
+
+
+def _why(rows, res):
+    """The lines flagged by evidence (the synthetic estimates put a few outside)."""
+    return {(rows[i]["direction"], rows[i]["line"]): w for i, w in res.reasons.items()
+            if w != pl.OUTLIER_REASON}  # fmt: skip
+
+
+def test_paired_scores_add_the_two_directions():
+    assert pl.paired_scores(3.0, 3.0) == pytest.approx(6.0 / math.sqrt(2.0))
+    assert pl.paired_scores(5.0, -5.0) == 0.0
+    assert np.isnan(pl.paired_scores(np.nan, 3.0))
+    # two independent normal scores: the sum has the spread of one
+    rng = np.random.default_rng(4236)
+    z = pl.paired_scores(rng.normal(size=20000), rng.normal(size=20000))
+    assert np.std(z) == pytest.approx(1.0, abs=0.03)
+
+
+def test_a_moderate_local_anomaly_in_both_directions_is_flagged_where_one_is_not():
+    # line 20 at 3.3 robust sds in both directions, line 30 in the trace only, line 31 in
+    # the retrace only; thresholds 4 (one direction) and 4 (both): 20 alone passes
+    rows = _local_rows(excess={("trace", 20): 3.3, ("retrace", 20): 3.3,
+                               ("trace", 30): 3.3, ("retrace", 31): 3.3})  # fmt: skip
+    pz = {(rows[i]["direction"], rows[i]["line"]): z
+          for i, z in pl.paired_scores_by_row(rows).items()}  # fmt: skip
+    assert pz[("trace", 20)] == pz[("retrace", 20)] > 4.2
+    assert max(pz[("trace", 30)], pz[("retrace", 31)]) < 3.5
+    res = pl.pool_groups(rows, CAL_E)
+    text = pl.EVIDENCE_REASON + pl.EVIDENCE_TEXT[pl.LOCAL_BOTH]
+    assert _why(rows, res) == {("trace", 20): text, ("retrace", 20): text}
+    by = {g["direction"]: g for g in res.groups}
+    assert all("20" in by[d]["flagged_lines"].split() for d in ("trace", "retrace", "both"))
+    # the paired threshold is its own: raised above the pair's score, nothing is flagged
+    high = dataclasses.replace(CAL_E, evidence_z={**CAL_E.evidence_z, "local_both": 6.0})
+    assert not _why(rows, pl.pool_groups(rows, high))
+    # a strong anomaly in one direction still shows in the pair (10 sds: 7 in the pair)
+    one = _local_rows(excess={("trace", 12): 10.0})
+    assert _why(one, pl.pool_groups(one, CAL_E)) == {("trace", 12): text, ("retrace", 12): text}
+
+
+def test_a_line_seen_in_one_direction_keeps_the_one_direction_rule():
+    single = pl.EVIDENCE_REASON + pl.EVIDENCE_TEXT[pl.LOCAL]
+    # a map of one direction: 3.3 sds is not flagged, 5 sds is, by the local rule
+    rows = _local_rows(excess={("trace", 20): 3.3, ("trace", 40): 5.0}, directions=("trace",))
+    res = pl.pool_groups(rows, CAL_E)
+    assert _why(rows, res) == {("trace", 40): single}
+    assert [g["direction"] for g in res.groups] == ["trace"]
+    # the one-direction threshold is the local one, not the paired one
+    low = dataclasses.replace(CAL_E, evidence_z={**CAL_E.evidence_z, "local": 3.0})
+    assert _why(rows, pl.pool_groups(rows, low)) == {("trace", 20): single,
+                                                     ("trace", 40): single}
+    # in a map of both directions, a line whose retrace row has no local evidence is
+    # judged by its trace row alone
+    both = _local_rows(excess={("trace", 40): 5.0, ("retrace", 40): 0.0})
+    for r in both:
+        if r["direction"] == "retrace" and r["line"] == 40:
+            r["evidence_local"] = None
+    assert _why(both, pl.pool_groups(both, CAL_E)) == {("trace", 40): single}

@@ -116,15 +116,21 @@ OUTLIER_REASON = "inconsistent with its map: outside the map's predictive interv
 JUDGED_EVIDENCE = (*EVIDENCE, LOCAL)
 JUDGED_EVIDENCE_COLUMNS = (*EVIDENCE_COLUMNS, LOCAL_COLUMN)
 #: What each evidence says a line shows, in the reason of a line flagged for it.
+#: The local anomaly judged in trace and retrace together (:func:`paired_scores`): a key of
+#: :attr:`PoolingCalibration.evidence_z` and of :data:`EVIDENCE_TEXT`.
+LOCAL_BOTH = f"{LOCAL}_both"
 EVIDENCE_TEXT = {"slow": "slow, non-periodic content (a drift or a step)", "spikes": "spikes",
-                 LOCAL: "a local anomaly of a few stick-slip cycles (a defect)"}
+                 LOCAL: "a local anomaly of a few stick-slip cycles (a defect)",
+                 LOCAL_BOTH: "a local anomaly of a few stick-slip cycles in both scan "
+                             "directions (a defect)"}  # fmt: skip
 EVIDENCE_REASON = "shows what the other lines of its map do not: "
 #: Robust score above which a line is flagged for an evidence, where the calibration
 #: file names none: each evidence's quantile, one for all, at which 1 % of the lines of
-#: seed 4211's 120 homogeneous maps exceed at least one (``benchmarks/map_pooling.py``).
+#: seed 4211's 120 homogeneous maps exceed at least one (``benchmarks/map_pooling.py``;
+#: ``local`` there counts the rows of one direction, as it judges lines seen in one).
 #: The spikes' scores have a long tail (a line's noise, drawn per line, sets how far its
 #: slips stand out of it).
-DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.95, LOCAL: 3.09}
+DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.95, LOCAL: 3.09, LOCAL_BOTH: 3.09}
 #: Fewest lines with evidence whose median and MAD may judge one of them.
 MIN_EVIDENCE_LINES = 8
 #: Least robust scale of an evidence (ln units, dimensionless): lines that agree closer
@@ -169,8 +175,10 @@ class PoolingCalibration:
     evidence_z : dict of str to float
         Per evidence (:data:`JUDGED_EVIDENCE`), the robust score
         (:func:`evidence_scores`) above which a line is flagged as showing what the other
-        lines of its map do not; chosen on the calibration maps so that few normal lines
-        pass it. Missing names take :data:`DEFAULT_EVIDENCE_Z`.
+        lines of its map do not, and (:data:`LOCAL_BOTH`) the threshold of the local
+        anomaly's score in both directions together (:func:`paired_scores`); chosen on the
+        calibration maps so that few normal lines pass them. Missing names take
+        :data:`DEFAULT_EVIDENCE_Z`.
     config : dict
         How the constants were made (benchmark, seeds, maps, date).
     """
@@ -193,6 +201,11 @@ class PoolingCalibration:
         """:attr:`evidence_z` in the order of :data:`JUDGED_EVIDENCE`."""
         return np.array([float(self.evidence_z.get(k, DEFAULT_EVIDENCE_Z[k]))
                          for k in JUDGED_EVIDENCE])  # fmt: skip
+
+    def paired_threshold(self) -> float:
+        """The threshold of the local anomaly judged in both scan directions
+        (:data:`LOCAL_BOTH` of :attr:`evidence_z`)."""
+        return float(self.evidence_z.get(LOCAL_BOTH, DEFAULT_EVIDENCE_Z[LOCAL_BOTH]))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -477,11 +490,27 @@ def flag_evidence(E: np.ndarray, z: Sequence[float],
         return np.isfinite(S) & (S > np.asarray(z, float)[None, :])
 
 
-def evidence_reason(shown: Sequence[bool]) -> str:
+def evidence_reason(shown: Sequence[bool], both: bool = False) -> str:
     """The reason of a line flagged for the evidence ``shown`` (bool per
-    :data:`JUDGED_EVIDENCE`)."""
-    return EVIDENCE_REASON + " and ".join(
-        EVIDENCE_TEXT[k] for k, on in zip(JUDGED_EVIDENCE, shown, strict=True) if on)
+    :data:`JUDGED_EVIDENCE`) and, with ``both``, for the local anomaly in both scan
+    directions (:data:`LOCAL_BOTH`)."""
+    texts = [EVIDENCE_TEXT[k] for k, on in zip(JUDGED_EVIDENCE, shown, strict=True) if on]
+    return EVIDENCE_REASON + " and ".join(texts + ([EVIDENCE_TEXT[LOCAL_BOTH]] if both else []))
+
+
+def paired_scores(z_a: np.ndarray, z_b: np.ndarray) -> np.ndarray:
+    """The local anomaly of a line judged in both scan directions: ``(z_a + z_b) /
+    sqrt(2)`` of its two rows' robust scores (:func:`evidence_scores` against each
+    direction's own lines; NaN where either is).
+
+    A defect of the surface lies at one physical position, so it shows in both
+    directions' rows (a reader stores the retrace reversed, so at the mirrored position
+    of the row's own x), while each direction's noise is its own: for a normal line the
+    two scores are about independent and the sum has the spread of one, a defect's
+    excess adds up (sqrt(2) times one direction's, where it shows alike in both). Only
+    excess counts, as for one direction. Dimensionless, no scale of its own.
+    """
+    return (np.asarray(z_a, float) + np.asarray(z_b, float)) / math.sqrt(2.0)
 
 
 # ---------------------------------------------------------------------------- change point
@@ -633,11 +662,15 @@ class _Lines:
     v: dict[str, np.ndarray]
     usable: np.ndarray
     e: np.ndarray  # (n, len(JUDGED_EVIDENCE)) the rows' evidence, NaN where a row has none
+    #: the line's local anomaly in both directions (:func:`paired_scores`); NaN where the
+    #: line is seen in one direction (or either row has no local evidence)
+    paired: np.ndarray | None = None
 
     def take(self, sel: np.ndarray) -> _Lines:
+        paired = None if self.paired is None else self.paired[sel]
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
                       {k: a[sel] for k, a in self.v.items()}, self.usable[sel],
-                      self.e[sel])  # fmt: skip
+                      self.e[sel], paired)  # fmt: skip
 
 
 def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
@@ -709,15 +742,23 @@ def _target_columns(key: str, p: TargetPool, log: bool) -> dict[str, float]:
 def _judge(lines: _Lines, cal: PoolingCalibration) -> np.ndarray:
     """Why each line is flagged (object array of str over all lines; "" where it is not):
     lines that show what the others do not (every line with evidence, scored against
-    the usable lines: a line out of domain that shows spikes says so), then, among the
-    other usable lines, lines whose estimates are outside the predictive interval."""
+    the usable lines: a line out of domain that shows spikes says so; a line seen in
+    both directions is judged for the local anomaly by its paired score,
+    :func:`paired_scores`, instead of this direction's alone), then, among the other
+    usable lines, lines whose estimates are outside the predictive interval."""
     why = np.full(lines.index.size, "", object)
     odd = np.zeros(lines.index.size, bool)
     if lines.usable.any():
         shown = flag_evidence(lines.e, cal.evidence_threshold(), lines.usable)
-        odd = shown.any(axis=1)
+        both = np.zeros(lines.index.size, bool)
+        if lines.paired is not None:
+            paired = np.isfinite(lines.paired)
+            shown[paired, JUDGED_EVIDENCE.index(LOCAL)] = False
+            with np.errstate(invalid="ignore"):
+                both = paired & (lines.paired > cal.paired_threshold())
+        odd = shown.any(axis=1) | both
         for i in np.flatnonzero(odd):
-            why[i] = evidence_reason(shown[i])
+            why[i] = evidence_reason(shown[i], bool(both[i]))
     # judged without them: a defect line must not widen tau for the others
     sel = np.flatnonzero(lines.usable & ~odd)
     if sel.size:
@@ -829,6 +870,8 @@ def pool_groups(rows: Sequence[Mapping[str, Any]],
         by_dir = {d: _lines(rows, [i for i in idx if rows[i].get("direction") == d])
                   for d in DIRECTIONS}  # fmt: skip
         by_dir = {d: p for d, p in by_dir.items() if p.index.size}
+        if len(by_dir) == 2:
+            _pair(by_dir["trace"], by_dir["retrace"])
         stem = ":".join(str(s) for s in (file.rsplit("/", 1)[-1] or "map", channel) if s)
         if load_group is not None:
             stem += f":G{load_group}"
@@ -871,6 +914,48 @@ def _judge_segmented(lines: _Lines, change: int, cal: PoolingCalibration) -> np.
     for sel in (lines.line < change, lines.line >= change):
         why[sel] = _judge(lines.take(sel), cal)
     return why
+
+
+def _local_scores(lines: _Lines) -> np.ndarray:
+    """The local anomaly's robust score of each line of one direction (NaN where none)."""
+    if not lines.usable.any():
+        return np.full(lines.index.size, np.nan)
+    j = JUDGED_EVIDENCE.index(LOCAL)
+    return evidence_scores(lines.e[:, j:j + 1], lines.usable)[:, 0]
+
+
+def _pair(a: _Lines, b: _Lines) -> None:
+    """Set ``paired`` of both directions' lines: the paired local score of every line
+    seen in both (each direction scored against its own usable lines, over the whole map
+    direction)."""
+    za, zb = _local_scores(a), _local_scores(b)
+    pos_b = {int(ln): i for i, ln in enumerate(b.line.tolist())}
+    a.paired, b.paired = np.full(a.index.size, np.nan), np.full(b.index.size, np.nan)
+    for i, ln in enumerate(a.line.tolist()):
+        k = pos_b.get(int(ln))
+        if k is not None:
+            a.paired[i] = b.paired[k] = paired_scores(za[i], zb[k])
+
+
+def paired_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, float]:
+    """Each map line's paired local score (:func:`paired_scores`), as :func:`pool_groups`
+    judges it: row index -> score (both rows of a line the same; lines seen in one
+    direction and rows without local evidence left out, or NaN).
+
+    What :data:`LOCAL_BOTH` of :attr:`PoolingCalibration.evidence_z` is chosen on
+    (``benchmarks/map_pooling.py``).
+    """
+    out: dict[int, float] = {}
+    for idx in map_keys(rows).values():
+        a, b = (_lines(rows, [i for i in idx if rows[i].get("direction") == d])
+                for d in DIRECTIONS)  # fmt: skip
+        if not (a.index.size and b.index.size):
+            continue
+        _pair(a, b)
+        for p in (a, b):
+            for i, z in zip(p.index, p.paired, strict=True):
+                out[int(i)] = float(z)
+    return out
 
 
 def evidence_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, np.ndarray]:
