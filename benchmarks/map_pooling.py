@@ -28,21 +28,31 @@ spike burst on a line). Per-line estimates: the bundled line model (``load_estim
 as ``infer``), with the domain verdict. sigma_sys is calibrated on the calibration set
 (seed 4211: coverage 0.95 of the pooled 95 % interval, per target and per one/both
 directions) and written to ``src/stickslip/resources/map_pooling.json`` with ``--write``;
-so is each evidence's flag threshold (``evidence_z``: per evidence of
-``pooling.JUDGED_EVIDENCE``, ``evidence_slow`` / ``evidence_spikes`` / ``evidence_local``,
-the robust score of a line against its map's usable lines, at one common quantile chosen
-so that ``EVIDENCE_RATE`` of the calibration set's lines exceed at least one, a line
-counted once for both directions and whether or not its estimate is usable). Every
+so is each evidence's flag threshold (``evidence_z``: the robust score of a line against
+its map's usable lines for ``evidence_slow`` and ``evidence_spikes``, the larger of its
+two directions', and for ``evidence_local`` the paired score of both directions,
+``local_both``; at one common quantile chosen so that ``EVIDENCE_RATE`` of the
+calibration set's lines exceed at least one, a line counted once and whether or not its
+estimate is usable; ``local``, the rule for a line seen in one direction, at the same
+quantile over the rows of one direction). Every
 figure below is scored on the scoring set (seed 4223; ``--seed`` scores on another: a
 fresh seed for a held-out scoring, or a development seed that must not be the scoring
 set).
 
-Outlier lines: a defect line is one clean line of the parameter point simulated over
-two Gaussian defects (barrier +100 % of U0, 0.6 nm wide, at 5-11 nm of the substrate),
-put at the same line in both directions (the same clean force in trace and retrace);
-a spike burst adds 8 spikes of 2-4 nN, 1-3 pixels wide, to a line in both directions.
-A line counts as flagged where either direction's row is flagged (by its estimates or
-by its evidence, also where the row is out of domain).
+Outlier lines: a defect line is a line of the parameter point crossing two Gaussian
+defects of the surface (barrier +100 % of U0, 0.6 nm wide, at 5-11 nm of the substrate),
+simulated for each direction as a reader stores it: the trace scans forward over the
+defects; the retrace, which the readers store reversed in x and sign-flipped so that it
+reads as friction in its own scan direction, is simulated forward over the mirrored
+substrate (a defect at position x of the trace's recorded window [X0, X0 + L] at
+2 X0 + L - x), with its own thermal noise (its own seed); the tip's lag behind the
+support then puts the defect's response where a real retrace has it
+(``defect_pools``, cached as ``DEFECT_CACHE``; before, the retrace was the trace's own
+array, the same noise at the same index). A spike burst adds 8 spikes of 2-4 nN, 1-3
+pixels wide, to a line in both directions. A line counts as flagged where either
+direction's row is flagged (by its estimates or by its evidence, also where the row is
+out of domain). For comparison the benchmark also prints what the one-direction rule
+(the larger of the two directions' local scores, calibrated the same way) flags.
 
 Usage: NUMBA_NUM_THREADS=1 python benchmarks/map_pooling.py [--maps 300] [--cal-maps 150]
        [--work build/map_pooling] [--seed 4223] [--write]

@@ -65,6 +65,17 @@ Lines that break the pattern
   refused): it is left out of the pool in any case, and its reason says what it shows.
   ``local`` answers to a defect (a few cycles whose level differs from their
   neighbours'), which ``slow`` cannot tell from the drift and crosstalk of normal lines.
+  A surface defect lies at one physical position, seen in both scan directions (in a
+  retrace row, which a reader stores reversed, at the mirrored position), while each
+  direction's noise is its own: a line seen in both directions is judged for the local
+  anomaly by its *paired* score ``(z_trace + z_retrace) / sqrt(2)`` of its two rows'
+  robust scores (:func:`paired_scores`; each direction scored against its own usable
+  lines, over the whole map direction), against its own threshold
+  (``evidence_z["local_both"]``), and both rows are flagged; a line seen in one
+  direction (or whose other row has no local evidence) keeps the one-direction rule.
+  The position of the anomaly is not compared: the evidence column carries none, and
+  the tip's lag behind the support shifts a defect's response between the directions
+  by about twice the lag.
   The scale is the map's own, so no scale in nN or nm enters; rows without the columns
   (other estimators, older tables) are judged by their estimates only.
 - *A change along the slow scan axis* (a tip change, a domain of another material from
@@ -130,7 +141,7 @@ EVIDENCE_REASON = "shows what the other lines of its map do not: "
 #: ``local`` there counts the rows of one direction, as it judges lines seen in one).
 #: The spikes' scores have a long tail (a line's noise, drawn per line, sets how far its
 #: slips stand out of it).
-DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.95, LOCAL: 3.09, LOCAL_BOTH: 3.09}
+DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.97, LOCAL: 2.89, LOCAL_BOTH: 3.12}
 #: Fewest lines with evidence whose median and MAD may judge one of them.
 MIN_EVIDENCE_LINES = 8
 #: Least robust scale of an evidence (ln units, dimensionless): lines that agree closer
