@@ -878,11 +878,7 @@ def pool_groups(rows: Sequence[Mapping[str, Any]],
     for key, idx in map_keys(rows).items():
         file, channel, load_group, load = key
         unit = next((_blank(rows[i].get("load_unit")) for i in idx), None)
-        by_dir = {d: _lines(rows, [i for i in idx if rows[i].get("direction") == d])
-                  for d in DIRECTIONS}  # fmt: skip
-        by_dir = {d: p for d, p in by_dir.items() if p.index.size}
-        if len(by_dir) == 2:
-            _pair(by_dir["trace"], by_dir["retrace"])
+        by_dir = _map_lines(rows, idx)
         stem = ":".join(str(s) for s in (file.rsplit("/", 1)[-1] or "map", channel) if s)
         if load_group is not None:
             stem += f":G{load_group}"
@@ -948,6 +944,18 @@ def _pair(a: _Lines, b: _Lines) -> None:
             a.paired[i] = b.paired[k] = paired_scores(za[i], zb[k])
 
 
+def _map_lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> dict[str, _Lines]:
+    """The lines of one map (rows ``idx``) per scan direction that has any, in
+    :data:`DIRECTIONS` order; where it has both, each line's paired local score set
+    (:func:`_pair`)."""
+    by_dir = {d: _lines(rows, [i for i in idx if rows[i].get("direction") == d])
+              for d in DIRECTIONS}  # fmt: skip
+    by_dir = {d: p for d, p in by_dir.items() if p.index.size}
+    if len(by_dir) == 2:
+        _pair(by_dir["trace"], by_dir["retrace"])
+    return by_dir
+
+
 def paired_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, float]:
     """Each map line's paired local score (:func:`paired_scores`), as :func:`pool_groups`
     judges it: row index -> score (both rows of a line the same; lines seen in one
@@ -958,12 +966,10 @@ def paired_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, float]:
     """
     out: dict[int, float] = {}
     for idx in map_keys(rows).values():
-        a, b = (_lines(rows, [i for i in idx if rows[i].get("direction") == d])
-                for d in DIRECTIONS)  # fmt: skip
-        if not (a.index.size and b.index.size):
+        by_dir = _map_lines(rows, idx)
+        if len(by_dir) < 2:
             continue
-        _pair(a, b)
-        for p in (a, b):
+        for p in by_dir.values():
             for i, z in zip(p.index, p.paired, strict=True):
                 out[int(i)] = float(z)
     return out
@@ -980,8 +986,7 @@ def evidence_scores_by_row(rows: Sequence[Mapping[str, Any]]) -> dict[int, np.nd
     """
     out: dict[int, np.ndarray] = {}
     for idx in map_keys(rows).values():
-        for d in DIRECTIONS:
-            lines = _lines(rows, [i for i in idx if rows[i].get("direction") == d])
+        for lines in _map_lines(rows, idx).values():
             if not lines.usable.any():
                 continue
             S = evidence_scores(lines.e, lines.usable)
