@@ -6,8 +6,9 @@ directions, 32 to 512 lines each (drawn with weights 0.25/0.3/0.25/0.12/0.08 for
 have been scoring sets and 4231-4239 development sets (each set's figures in
 docs/explanation/maps.md); the next fresh scoring set is 4301, which nothing else in
 the project uses. Each set draws its own parameter points and simulates its own
-clean lines (6 parameter points per set: 128 lines each, 64 per change partner, 8 defect
-lines; 96 smooth lines for 3 points); a map draws its lines from the pool of its
+clean lines (24 parameter points per set: 64 lines each, 32 per change partner, 8 defect
+lines; 96 smooth lines for 3 points; until 2026-11-29 6 points of 128 lines, a design
+whose figures swung with the set's points); a map draws its lines from the pool of its
 parameter point (with
 replacement where the map has more lines than the pool: the clean force of such lines
 repeats, their noise and crosstalk do not). Per map, shared effects
@@ -87,10 +88,15 @@ CAL_SEED, SCORE_SEED = 4211, 4301
 SCORED_SEEDS = (4223, 4251, 4271, 4281, 4291)
 SIZES = np.array([32, 64, 128, 256, 512])
 SIZE_WEIGHTS = np.array([0.25, 0.3, 0.25, 0.12, 0.08])
-N_POINTS, POOL, PARTNER_POOL, SMOOTH_POOL, DEFECT_POOL = 6, 128, 64, 96, 8
-#: The defect lines' cache (trace and mirrored retrace; v2: before, the retrace was the
-#: trace's own array, so an older cache holds no retrace).
-DEFECT_CACHE = "defects_v2_{seed}.npz"
+#: Parameter points per set, and each point's clean lines, change partners' lines and
+#: defect lines; smooth maps: 3 points of SMOOTH_POOL lines. The model's bias at a point
+#: is shared by every map of it, so what a set measures (sigma_sys, the coverage, how
+#: well a defect shows) depends on its points: 24 of them (6 until 2026-11-29, when
+#: two sets of one design gave coverages 0.92 and 0.85 and defect rates 0.84 and 0.55).
+N_POINTS, POOL, PARTNER_POOL, DEFECT_POOL, SMOOTH_POOL = 24, 64, 32, 8, 96
+#: The caches of a set's lines (v2 and v3: the 24-point design; the 6-point design's
+#: were ``pools_{seed}`` and ``defects_v2_{seed}``).
+POOLS_CACHE, DEFECT_CACHE = "pools_v2_{seed}.npz", "defects_v3_{seed}.npz"
 KINDS = ("homogeneous", "tip", "domain", "smooth", "outliers")
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m")
 V0, T0, A = 60.0, 296.0, 0.246
@@ -109,10 +115,10 @@ UNION = ("slow", "spikes", pl.LOCAL_BOTH)
 # ---------------------------------------------------------------------------- line pools
 
 
-def _points(seed: int) -> np.ndarray:
-    rng = np.random.default_rng([seed, 1])
+def _points(seed: int, n: int = N_POINTS, stream: int = 1) -> np.ndarray:
+    rng = np.random.default_rng([seed, stream])
     out = []
-    while len(out) < N_POINTS:
+    while len(out) < n:
         U0, K = math.exp(rng.uniform(math.log(0.5), math.log(3.0))), \
             math.exp(rng.uniform(math.log(3.0), math.log(30.0)))  # fmt: skip
         if 2.5 <= eta_from(U0, K, A) <= 20:
@@ -125,10 +131,13 @@ def _sim(U0: np.ndarray, K: np.ndarray, seed: int, defects=None) -> np.ndarray:
 
 
 def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
-    """Clean lines of the set (cached in ``work``)."""
-    path = work / f"pools_{seed}.npz"
+    """Clean lines of the set (cached in ``work`` under :data:`POOLS_CACHE`; ``smooth``:
+    with the smooth maps' lines)."""
+    path = work / POOLS_CACHE.format(seed=seed)
     if path.exists():
-        return dict(np.load(path))
+        out = dict(np.load(path))
+        if "smooth" in out or not smooth:
+            return out
     pts = _points(seed)
     rng = np.random.default_rng([seed, 2])
     # partners: U0 x1.4 / x0.7 (tip change) and K x1.4 / x0.65 (domain)
@@ -142,13 +151,6 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
                       seed + 1).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
     out["domain"] = _sim(rep(pts[:, 0], PARTNER_POOL), rep(pts[:, 1] * kf, PARTNER_POOL),
                          seed + 2).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
-    # defect lines, trace only (the cache's format of old; :func:`defect_pools` replaces
-    # them by trace and mirrored retrace; the draw keeps the smooth phases below)
-    n = N_POINTS * DEFECT_POOL
-    xs = rng.uniform(3.0, 9.0, (n, 2)) + 2.0
-    defects = (xs, np.full((n, 2), 1.0), np.full((n, 2), 0.6))
-    out["defect"] = _sim(rep(pts[:, 0], DEFECT_POOL), rep(pts[:, 1], DEFECT_POOL), seed + 3,
-                         defects).reshape(N_POINTS, DEFECT_POOL, -1)  # fmt: skip
     if smooth:
         k = 3
         phase = rng.uniform(0, 2 * np.pi, k)
@@ -164,39 +166,42 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
     return out
 
 
-def _defect_positions(seed: int) -> np.ndarray:
-    """(N_POINTS * DEFECT_POOL, 2) substrate positions of the defect lines' two defects,
-    nm: 5-11 nm of the substrate (the recorded window starts at the warm-up, 1-2 nm)."""
-    rng = np.random.default_rng([seed, 2])
-    rng.choice([1.4, 0.7], N_POINTS)  # the partners' factors come first (as in pools)
-    rng.choice([1.4, 0.65], N_POINTS)
-    return rng.uniform(3.0, 9.0, (N_POINTS * DEFECT_POOL, 2)) + 2.0
+def _defect_positions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 2) substrate positions of a defect line's two defects, nm: 5-11 nm of the
+    substrate (the recorded window starts at the warm-up, 1-2 nm)."""
+    return rng.uniform(3.0, 9.0, (n, 2)) + 2.0
 
 
-def defect_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
-    """The defect lines of the set, trace and retrace (cached in ``work`` under
-    :data:`DEFECT_CACHE`): each line simulated twice over the same two defects, the trace
-    forward (seed + 3) and the retrace over the mirrored substrate with its own thermal
-    noise (seed + 5), so that its row reads in its own scan direction as a reader stores
-    it (reversed in x, sign-flipped): the defect at physical position ``x`` of the
-    trace's window ``[X0, X0 + L]`` sits at ``2 X0 + L - x``."""
-    path = work / DEFECT_CACHE.format(seed=seed)
-    if path.exists():
-        return dict(np.load(path))
-    pts = _points(seed)
-    U0, K = np.repeat(pts[:, 0], DEFECT_POOL), np.repeat(pts[:, 1], DEFECT_POOL)
-    xs = _defect_positions(seed)
+def _defect_lines(U0: np.ndarray, K: np.ndarray, xs: np.ndarray, seed: int
+                  ) -> dict[str, np.ndarray]:  # fmt: skip
+    """Defect lines over the defects ``xs`` (n, 2), trace and retrace: each line simulated
+    twice, the trace forward (seed + 3) and the retrace over the mirrored substrate with
+    its own thermal noise (seed + 5), so that its row reads in its own scan direction as
+    a reader stores it (reversed in x, sign-flipped): the defect at physical position
+    ``x`` of the trace's window ``[X0, X0 + L]`` sits at ``2 X0 + L - x``."""
     height, width = np.full(xs.shape, 1.0), np.full(xs.shape, 0.6)
     s = PhysicalSettings()
-    t0 = time.time()
     trace = simulate(U0, K, s, seed=seed + 3, defects=(xs, height, width))
     X0 = trace.support_nm[:, 0] - 0.5 * s.pixel_nm  # support at the window's start
     mirrored = 2.0 * X0[:, None] + s.length_nm - xs
     retrace = simulate(U0, K, s, seed=seed + 5, defects=(mirrored, height, width))
-    out = {"defect": trace.force_nN.reshape(N_POINTS, DEFECT_POOL, -1),
-           "defect_retrace": retrace.force_nN.reshape(N_POINTS, DEFECT_POOL, -1),
-           "defect_x_nm": xs.reshape(N_POINTS, DEFECT_POOL, 2),
-           "defect_x_retrace_nm": mirrored.reshape(N_POINTS, DEFECT_POOL, 2)}  # fmt: skip
+    return {"defect": trace.force_nN, "defect_retrace": retrace.force_nN,
+            "defect_x_nm": xs, "defect_x_retrace_nm": mirrored}  # fmt: skip
+
+
+def defect_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
+    """The set's defect lines (cached in ``work`` under :data:`DEFECT_CACHE`):
+    :data:`DEFECT_POOL` per parameter point (:func:`_defect_lines`)."""
+    path = work / DEFECT_CACHE.format(seed=seed)
+    if path.exists():
+        return dict(np.load(path))
+    pts = _points(seed)
+    rng = np.random.default_rng([seed, 6])
+    t0 = time.time()
+    rep = np.repeat
+    lines = _defect_lines(rep(pts[:, 0], DEFECT_POOL), rep(pts[:, 1], DEFECT_POOL),
+                          _defect_positions(rng, N_POINTS * DEFECT_POOL), seed)  # fmt: skip
+    out = {k: v.reshape(N_POINTS, DEFECT_POOL, *v.shape[1:]) for k, v in lines.items()}
     print(f"simulated the defect lines of seed {seed} in {time.time() - t0:.0f} s")
     work.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
@@ -204,8 +209,7 @@ def defect_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
 
 
 def line_pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
-    """:func:`pools` and :func:`defect_pools` of the set together (an older pools cache's
-    ``defect`` lines, trace only, are replaced)."""
+    """:func:`pools` and :func:`defect_pools` of the set together."""
     return {**pools(seed, work, smooth), **defect_pools(seed, work)}
 
 
@@ -468,6 +472,18 @@ def flag_rates(maps: list[dict], which: str, target: str) -> str:
             f"{out:.4f} left out of the pool (flagged or out of domain)")
 
 
+def by_eta(maps: list[dict], bands=(2.5, 5.0, 10.0, 20.0)) -> str:
+    """Share of the outlier lines flagged per band of their map's eta (point), with counts."""
+    eta = np.array([eta_from(m["U0"], m["K"], A) for m in maps])
+    cells = []
+    for lo, hi in zip(bands[:-1], bands[1:], strict=False):
+        f = [m["flagged"][i] for m, e in zip(maps, eta, strict=True) if lo <= e < hi
+             for i in np.flatnonzero(m["outliers"])]  # fmt: skip
+        cells.append(f"eta {lo:g}-{hi:g}: {np.mean(f):.3f} of {len(f)}" if f else
+                     f"eta {lo:g}-{hi:g}: none")  # fmt: skip
+    return "; ".join(cells)
+
+
 def coverage(maps: list[dict], dirs: tuple[str, ...], k: str) -> float:
     hits = []
     for m in maps:
@@ -483,6 +499,8 @@ def main() -> None:
     ap.add_argument("--maps", type=int, default=300, help="homogeneous scoring maps")
     ap.add_argument("--cal-maps", type=int, default=120, help="homogeneous calibration maps")
     ap.add_argument("--change-maps", type=int, default=60, help="per kind: tip change, domain")
+    ap.add_argument("--outlier-maps", type=int, default=120,
+                    help="maps with outlier lines (half defect lines, half spike bursts)")
     ap.add_argument("--work", type=Path, default=ROOT / "build" / "map_pooling")
     ap.add_argument("--seed", type=int, default=SCORE_SEED,
                     help=f"scoring seed (default {SCORE_SEED}; another for development runs)")
@@ -496,7 +514,7 @@ def main() -> None:
     zero = pl.PoolingCalibration(sys_single=dict.fromkeys(pl.POOL_TARGETS, 0.0),
                                  sys_both=dict.fromkeys(pl.POOL_TARGETS, 0.0))  # fmt: skip
     # -- calibration set
-    Pc = line_pools(CAL_SEED, args.work, smooth=False)
+    Pc = pools(CAL_SEED, args.work, smooth=False)
     cal_maps = run_maps("homogeneous", args.cal_maps, Pc, CAL_SEED, est, zero)
     single, both = calibrate(cal_maps)
     evidence_z = evidence_thresholds(cal_maps)
@@ -572,12 +590,13 @@ def main() -> None:
           f"(sinusoid rms 0.141); change reported in {ch:.2f}; coverage of mean U0 (both) "
           f"{coverage(smooth, ('both',), 'U0_eV'):.2f}")  # fmt: skip
     # -- outliers
-    outl = run_maps("outliers", 60, P, seed, est, cal)
+    outl = run_maps("outliers", args.outlier_maps, P, seed, est, cal)
     for ok in ("defect", "spikes"):
         sel = [m for m in outl if m["outlier_kind"] == ok]
         n_o = sum(int(m["outliers"].sum()) for m in sel)
         print(f"outlier lines ({ok}, {len(sel)} maps, {n_o} lines): "
               f"{flag_rates(sel, 'outliers', '>= 0.80')}")
+        print(f"  by eta: {by_eta(sel)}")
         print(f"  normal lines in those maps: {flag_rates(sel, 'normal', '<= 0.02')}")
         print(f"  for comparison, the one-direction rule (the larger of the two directions' "
               f"local scores): {one_direction_rule(cal_maps, sel, 'outliers'):.4f} of these "
