@@ -6,7 +6,7 @@ directions, 32 to 512 lines each (drawn with weights 0.25/0.3/0.25/0.12/0.08 for
 have been scoring sets and 4231-4239 development sets (each set's figures in
 docs/explanation/maps.md); the next fresh scoring set is 4301, which nothing else in
 the project uses. Each set draws its own parameter points and simulates its own
-clean lines (24 parameter points per set: 64 lines each, 32 per change partner, 8 defect
+clean lines (48 parameter points per set: 64 lines each, 32 per change partner, 4 defect
 lines; 96 smooth lines for 3 points; until 2026-11-29 6 points of 128 lines, a design
 whose figures swung with the set's points); a map draws its lines from the pool of its
 parameter point (with
@@ -27,19 +27,20 @@ Map kinds: homogeneous (all lines one U0, K); tip change (U0 x1.4 or x0.7 from a
 line on); domain (K x1.4 or x0.65 from a random line on: a domain of another material
 crossing the rest of the map); smooth (U0 +-20 % sinusoidal along the slow axis); and
 homogeneous maps with outlier lines (one to three lines crossing a strong defect, or a
-spike burst on a line). Per-line estimates: the bundled line model (``load_estimator()``,
-as ``infer``), with the domain verdict. sigma_sys is calibrated on the calibration set
-(seed 4211: coverage 0.95 of the pooled 95 % interval, per target and per one/both
-directions) and written to ``src/stickslip/resources/map_pooling.json`` with ``--write``;
-so is each evidence's flag threshold (``evidence_z``: the robust score of a line against
-its map's usable lines for ``evidence_slow`` and ``evidence_spikes``, the larger of its
-two directions', and for ``evidence_local`` the paired score of both directions,
-``local_both``; at one common quantile chosen so that ``EVIDENCE_RATE`` of the
-calibration set's lines exceed at least one, a line counted once and whether or not its
-estimate is usable; ``local``, the rule for a line seen in one direction, at the same
-quantile over the rows of one direction). Every
-figure below is scored on the set ``--seed`` (default 4301, the next fresh one; a
-development run takes a seed of its own, never one that will score).
+spike burst on a line). Per-line estimates: the bundled line model
+(``load_estimator()``, as ``infer``), with the domain verdict. sigma_sys is calibrated
+on the calibration set (seed 4211: 384 homogeneous maps over 96 parameter points of
+their own; coverage 0.95 of the pooled 95 % interval, per target and per one/both
+directions) and written to ``src/stickslip/resources/map_pooling.json`` with
+``--write``; so is each evidence's flag threshold (``evidence_z``: the robust score of a
+line against its map's usable lines for ``evidence_slow`` and ``evidence_spikes``, the
+larger of its two directions', and for ``evidence_local`` the paired score of both
+directions, ``local_both``; at one common quantile chosen so that ``EVIDENCE_RATE`` of
+the calibration set's lines exceed at least one, a line counted once and whether or not
+its estimate is usable; ``local``, the rule for a line seen in one direction, at the
+same quantile over the rows of one direction). Every figure below is scored on the set
+``--seed`` (default 4301, the next fresh one; a development run takes a seed of its own,
+never one that will score).
 
 Outlier lines: a defect line is a line of the parameter point crossing two Gaussian
 defects of the surface (barrier +100 % of U0, 0.6 nm wide, at 5-11 nm of the substrate),
@@ -90,13 +91,17 @@ SIZES = np.array([32, 64, 128, 256, 512])
 SIZE_WEIGHTS = np.array([0.25, 0.3, 0.25, 0.12, 0.08])
 #: Parameter points per set, and each point's clean lines, change partners' lines and
 #: defect lines; smooth maps: 3 points of SMOOTH_POOL lines. The model's bias at a point
-#: is shared by every map of it, so what a set measures (sigma_sys, the coverage, how
-#: well a defect shows) depends on its points: 24 of them (6 until 2026-11-29, when
-#: two sets of one design gave coverages 0.92 and 0.85 and defect rates 0.84 and 0.55).
-N_POINTS, POOL, PARTNER_POOL, DEFECT_POOL, SMOOTH_POOL = 24, 64, 32, 8, 96
-#: The caches of a set's lines (v2 and v3: the 24-point design; the 6-point design's
-#: were ``pools_{seed}`` and ``defects_v2_{seed}``).
-POOLS_CACHE, DEFECT_CACHE = "pools_v2_{seed}.npz", "defects_v3_{seed}.npz"
+#: is shared by every map of it, so a set's figures (coverage, how well a defect shows)
+#: are about as uncertain as N_POINTS draws allow: with 6 points (the design until
+#: 2026-11-29) two sets gave U0 coverages 0.99 and 0.92 and defect rates 0.84 and 0.55.
+N_POINTS, POOL, PARTNER_POOL, DEFECT_POOL, SMOOTH_POOL = 48, 64, 32, 4, 96
+#: Parameter points of the calibration set (homogeneous maps only) and its maps:
+#: sigma_sys is the spread of the model's bias over points, so it takes more of them.
+CAL_POINTS, CAL_MAPS = 96, 384
+#: The caches of a set's lines (the 6-point design's were ``pools_{seed}`` and
+#: ``defects_v2_{seed}``) and of the calibration set's.
+POOLS_CACHE, DEFECT_CACHE = "pools_v3_{seed}.npz", "defects_v4_{seed}.npz"
+CAL_CACHE = "calibration_v2_{seed}.npz"
 KINDS = ("homogeneous", "tip", "domain", "smooth", "outliers")
 TARGETS = ("F_mean_nN", "U0_eV", "K_N_m")
 V0, T0, A = 60.0, 296.0, 0.246
@@ -161,6 +166,22 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
             k, SMOOTH_POOL, -1)
         out["smooth_U0"] = U0s.reshape(k, SMOOTH_POOL)
     print(f"simulated the pools of seed {seed} in {time.time() - t0:.0f} s")
+    work.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **out)
+    return out
+
+
+def calibration_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
+    """The calibration set's clean lines (cached in ``work`` under :data:`CAL_CACHE`):
+    :data:`CAL_POINTS` parameter points of :data:`POOL` lines each."""
+    path = work / CAL_CACHE.format(seed=seed)
+    if path.exists():
+        return dict(np.load(path))
+    pts = _points(seed, CAL_POINTS)
+    t0 = time.time()
+    base = _sim(np.repeat(pts[:, 0], POOL), np.repeat(pts[:, 1], POOL), seed)
+    out = {"points": pts, "base": base.reshape(CAL_POINTS, POOL, -1)}
+    print(f"simulated the calibration lines of seed {seed} in {time.time() - t0:.0f} s")
     work.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
     return out
@@ -286,7 +307,7 @@ def run_maps(kind: str, count: int, P: dict, seed: int, est, cal: pl.PoolingCali
     rng = np.random.default_rng([seed, 3, KINDS.index(kind)])
     out = []
     for m in range(count):
-        p = int(rng.integers(0, N_POINTS if kind != "smooth" else P["smooth"].shape[0]))
+        p = int(rng.integers(0, (P["smooth"] if kind == "smooth" else P["points"]).shape[0]))
         n = int(rng.choice(SIZES, p=SIZE_WEIGHTS))
         U0, K = P["points"][p]
         truth = {"U0_eV": U0, "K_N_m": K}
@@ -497,7 +518,7 @@ def coverage(maps: list[dict], dirs: tuple[str, ...], k: str) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--maps", type=int, default=300, help="homogeneous scoring maps")
-    ap.add_argument("--cal-maps", type=int, default=120, help="homogeneous calibration maps")
+    ap.add_argument("--cal-maps", type=int, default=CAL_MAPS, help="homogeneous calibration maps")
     ap.add_argument("--change-maps", type=int, default=60, help="per kind: tip change, domain")
     ap.add_argument("--outlier-maps", type=int, default=120,
                     help="maps with outlier lines (half defect lines, half spike bursts)")
@@ -514,7 +535,7 @@ def main() -> None:
     zero = pl.PoolingCalibration(sys_single=dict.fromkeys(pl.POOL_TARGETS, 0.0),
                                  sys_both=dict.fromkeys(pl.POOL_TARGETS, 0.0))  # fmt: skip
     # -- calibration set
-    Pc = pools(CAL_SEED, args.work, smooth=False)
+    Pc = calibration_pools(CAL_SEED, args.work)
     cal_maps = run_maps("homogeneous", args.cal_maps, Pc, CAL_SEED, est, zero)
     single, both = calibrate(cal_maps)
     evidence_z = evidence_thresholds(cal_maps)

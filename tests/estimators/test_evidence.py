@@ -9,7 +9,6 @@ from stickslip.estimators.evidence import (
     line_evidence_batch,
     local_evidence,
     local_kernel,
-    paired_local_evidence,
 )
 from stickslip.simulators import PhysicalSettings, simulate
 
@@ -116,48 +115,3 @@ def test_local_evidence_has_no_force_scale_and_reads_lines_of_any_length():
     r = np.arange(edges.shape[0])
     for p in (0, 1, 2):
         assert np.abs((r ** p) @ edges).max() < 1e-6 * max(1, r.max() ** p)
-
-
-def _defect_pair(U0: float, K: float, at_nm: float, seed: int) -> tuple[np.ndarray, ...]:
-    """A thermal line over one defect (barrier +100 % of U0, 0.6 nm wide, at ``at_nm`` of
-    the substrate) in both directions, as a reader stores them (the retrace simulated
-    forward over the mirrored substrate: reversed in x, reading as friction), and the
-    same pair without the defect."""
-    s = PhysicalSettings()
-    x0 = simulate([U0], [K], s, seed=seed).support_nm[0, 0] - 0.5 * s.pixel_nm
-    out = []
-    for where in (at_nm, 2.0 * x0 + s.length_nm - at_nm):
-        d = (np.array([[where]]), np.array([[1.0]]), np.array([[0.6]]))
-        out.append(simulate([U0], [K], s, seed=seed + len(out), defects=d).force_nN[0])
-    for k in range(2):
-        out.append(simulate([U0], [K], s, seed=seed + 2 + k).force_nN[0])
-    return tuple(out)
-
-
-def test_the_two_directions_see_a_defect_at_one_place_less_the_tips_lag():
-    # soft contact: the tip trails the support by <F>/K = several tenths of a nm, so the
-    # two directions' responses lie 2 <F>/K apart, and compared at the same x they miss
-    U0, K = 1.0, 3.0
-    t, r, t0, r0 = _defect_pair(U0, K, 7.0, seed=11)
-    dx = 11.0 / 512
-    lag = 2.0 * 0.5 * (t.mean() + r.mean()) / K / dx
-    assert lag > 10.0  # pixels
-    e = {name: paired_local_evidence(t, r, PERIOD_PX, g)
-         for name, g in (("lag", lag), ("none", 0.0), ("reversed", -lag))}  # fmt: skip
-    assert e["lag"] > e["none"] + 0.2 and e["lag"] > e["reversed"] + 0.4
-    # the defect stands out of the same pair without it by more than either row alone
-    clean = paired_local_evidence(t0, r0, PERIOD_PX, lag)
-    single = local_evidence([t, r, t0, r0], PERIOD_PX)
-    assert e["lag"] - clean > max(single[0] - single[2], single[1] - single[3])
-
-
-def test_paired_evidence_has_no_force_scale_and_refuses_rows_it_cannot_compare():
-    t, r, *_ = _defect_pair(1.5, 8.0, 8.0, seed=21)
-    e = paired_local_evidence(t, r, PERIOD_PX, 6.0)
-    assert np.isfinite(e)
-    assert abs(paired_local_evidence(10.0 * t + 3.0, 10.0 * r - 3.0, PERIOD_PX, 6.0) - e) < 1e-6
-    assert np.isnan(paired_local_evidence(t, r[:-5], PERIOD_PX, 6.0))
-    assert np.isnan(paired_local_evidence(t[:20], r[:20], PERIOD_PX, 0.0))
-    bad = r.copy()
-    bad[7] = np.nan
-    assert np.isnan(paired_local_evidence(t, bad, PERIOD_PX, 0.0))

@@ -417,29 +417,3 @@ def test_a_line_seen_in_one_direction_keeps_the_one_direction_rule():
         if r["direction"] == "retrace" and r["line"] == 40:
             r["evidence_local"] = None
     assert _why(both, pl.pool_groups(both, CAL_E)) == {("trace", 40): single}
-
-
-def test_a_pair_column_judges_the_line_seen_both_ways_in_place_of_the_two_rows():
-    # the rows' own local scores say nothing odd; the pair evidence (both rows of a line
-    # one value) puts line 25 at 6 robust sds above the map's usable lines
-    rows = _local_rows()
-    rng = np.random.default_rng(4302)
-    by_line = {ln: float(rng.normal(1.0, 0.2)) for ln in {r["line"] for r in rows}}
-    e = np.array(list(by_line.values()))
-    med, sd = float(np.median(e)), 1.4826 * float(np.median(np.abs(e - np.median(e))))
-    by_line[25] = med + 6.0 * sd
-    for r in rows:
-        r["evidence_local_pair"] = by_line[r["line"]]
-    pz = {(rows[i]["direction"], rows[i]["line"]): z
-          for i, z in pl.paired_scores_by_row(rows).items()}  # fmt: skip
-    assert pz[("trace", 25)] == pz[("retrace", 25)] == pytest.approx(6.0, abs=0.5)
-    text = pl.EVIDENCE_REASON + pl.EVIDENCE_TEXT[pl.LOCAL_BOTH]
-    assert _why(rows, pl.pool_groups(rows, CAL_E)) == {("trace", 25): text,
-                                                       ("retrace", 25): text}
-    # a line whose rows lack it falls back on the two rows' own scores
-    for r in rows:
-        if r["line"] == 25:
-            r["evidence_local_pair"] = None
-    pz = {(rows[i]["direction"], rows[i]["line"]): z
-          for i, z in pl.paired_scores_by_row(rows).items()}  # fmt: skip
-    assert abs(pz[("trace", 25)]) < 3.0

@@ -24,15 +24,12 @@ The evidence, per mapped line (on the model's reference lattice and pixel):
 Both are dimensionless (no scale of their own in nN or nm) and cost one pass over the
 line.
 
-Two more measures, read by the per-map pooling only and not by the calibration's factor:
+A third measure, read by the per-map pooling only and not by the calibration's factor:
 
 - ``local`` (:func:`local_evidence`): a local anomaly, a few stick-slip cycles whose level
   differs from their neighbours' (a point defect's force), told from a smooth drift or
   crosstalk curve by a filter a few lattice periods wide that is blind to an offset, a
   slope and a curvature. Also dimensionless.
-- ``local_pair`` (:func:`paired_local_evidence`): the same anomaly read in the two
-  directions of a scan line at one position (a defect is one place of the surface; each
-  direction's noise is its own), the tip's lag between the directions allowed for.
 """
 
 from __future__ import annotations
@@ -169,27 +166,19 @@ def local_kernel(sigma_px: float) -> np.ndarray:
     return _edge_kernels(sigma_px, 2 * h + 1, LOCAL_REACH)[:, -1].copy()
 
 
-def _edge_centres(sigma_px: float, length: int, edge: float) -> np.ndarray:
-    """Centres of :func:`_edge_kernels`' columns: from ``edge`` sigmas after a series'
-    start up to where the whole filter fits (and ``edge`` sigmas before its end); the
-    middle of a series too short for any."""
-    h = max(1, int(np.ceil(LOCAL_REACH * sigma_px)))
-    first = min(max(1, int(np.ceil(edge * sigma_px))), h)
-    return np.array(list(range(first, min(h, length - 1 - first) + 1)) or [length // 2])
-
-
 @lru_cache(maxsize=32)
 def _edge_kernels(sigma_px: float, length: int, edge: float) -> np.ndarray:
     """The filter (:func:`local_kernel`) centred at each position ``c`` of a series of
     ``length`` samples from ``edge`` sigmas after its start up to where the whole filter
-    fits (last column; ``c`` at least ``edge`` sigmas before the series' end too,
-    :func:`_edge_centres`), each cut to the series, made orthogonal to an offset, a slope
-    and a curvature over what is left, and of unit norm; rows: the series' first
-    samples. Read-only (cached)."""
+    fits (last column; ``c`` at least ``edge`` sigmas before the series' end too), each
+    cut to the series, made orthogonal to an offset, a slope and a curvature over what is
+    left, and of unit norm; rows: the series' first samples. A series too short for any
+    such ``c`` gets the filter at its middle. Read-only (cached)."""
     h = max(1, int(np.ceil(LOCAL_REACH * sigma_px)))
+    first = min(max(1, int(np.ceil(edge * sigma_px))), h)
     rows = min(2 * h + 1, length)
-    centres = _edge_centres(sigma_px, length, edge)
-    out = np.zeros((rows, centres.size))
+    centres = list(range(first, min(h, length - 1 - first) + 1)) or [length // 2]
+    out = np.zeros((rows, len(centres)))
     for col, c in enumerate(centres):
         idx = np.arange(max(0, c - h), min(c + h + 1, rows))
         t = (idx - c) / sigma_px
@@ -201,46 +190,24 @@ def _edge_kernels(sigma_px: float, length: int, edge: float) -> np.ndarray:
     return out
 
 
-def _local_blocks(level: np.ndarray, sigma_px: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The local filter's response to B level series (B, n) at every centre it is
-    evaluated at, as blocks ``(centres (m,), responses (B, m))``: the filter cut to the
-    series near its start, near its end (the filter is odd: its cut mirror image is the
-    negative), and whole where it fits. Each response is the correlation with the filter
-    in the series' own orientation, so a defect's dipole has the same sign wherever it
-    lies."""
-    from scipy.signal import fftconvolve
-
-    n = level.shape[1]
-    edges = _edge_kernels(sigma_px, n, LOCAL_EDGE)
-    centres = _edge_centres(sigma_px, n, LOCAL_EDGE)
-    m = edges.shape[0]
-    blocks = [(centres, level[:, :m] @ edges),
-              (n - 1 - centres, -(level[:, ::-1][:, :m] @ edges))]  # fmt: skip
-    k = local_kernel(sigma_px)
-    if n >= k.size:  # where the whole filter lies within the line
-        inner = fftconvolve(level, k[None, ::-1], mode="valid", axes=1)
-        blocks.append((np.arange(inner.shape[1]) + k.size // 2, inner))
-    return blocks
-
-
 def _local_batch(F: np.ndarray, period_px: float) -> np.ndarray:
     """:func:`local_evidence` of B lines of one length, (B,)."""
+    from scipy.signal import fftconvolve
+
     level = sliding_period_mean(F, period_px)
     profile_std = _profile(F, period_px)[0].std(axis=1)
-    blocks = _local_blocks(level, LOCAL_SCALE * period_px)
-    best = np.max([np.abs(v).max(axis=1) for _, v in blocks], axis=0)
+    sigma = LOCAL_SCALE * period_px
+    n = level.shape[1]
+    edges = _edge_kernels(sigma, n, LOCAL_EDGE)
+    k = local_kernel(sigma)
+    # near the ends: the filter cut to the line (from both ends; the filter is odd)
+    m = edges.shape[0]
+    best = np.maximum(np.abs(level[:, :m] @ edges).max(axis=1),
+                      np.abs(level[:, ::-1][:, :m] @ edges).max(axis=1))  # fmt: skip
+    if n >= k.size:  # where the whole filter lies within the line
+        inner = fftconvolve(level, k[None, ::-1], mode="valid", axes=1)
+        best = np.maximum(best, np.abs(inner).max(axis=1))
     return np.log(best / (profile_std + _TINY) + 1e-3)
-
-
-def _local_series(F: np.ndarray, period_px: float) -> np.ndarray:
-    """The local filter's response along the one-period level of B lines (B, n; the
-    level's length, :func:`~stickslip.estimators.periodic.sliding_period_mean`): NaN where it is not
-    evaluated (:func:`_local_blocks`; a later block's value where two meet)."""
-    level = sliding_period_mean(F, period_px)
-    out = np.full(level.shape, np.nan)
-    for centres, values in _local_blocks(level, LOCAL_SCALE * period_px):
-        out[:, centres] = values
-    return out
 
 
 def local_evidence(lines: list[np.ndarray] | np.ndarray, period_px: float) -> np.ndarray:
@@ -274,60 +241,3 @@ def local_evidence(lines: list[np.ndarray] | np.ndarray, period_px: float) -> np
         Zeros for a line shorter than two periods (nothing to compare).
     """
     return _by_length(lines, period_px, _local_batch, ())
-
-
-#: What :func:`paired_local_evidence` is called in the result table (both rows of a
-#: trace/retrace pair carry it; the per-map pooling judges a line seen both ways by it).
-LOCAL_PAIR_COLUMN = f"evidence_{LOCAL}_pair"
-
-
-def paired_local_evidence(trace_nN: np.ndarray, retrace_nN: np.ndarray, period_px: float,
-                          lag_px: float = 0.0) -> float:  # fmt: skip
-    """The local anomaly of one scan line read in both directions at one position.
-
-    A defect lies at one place of the surface. In the trace its force ``-dV/dx`` raises
-    the level of the cycles before it and lowers those after; the retrace meets the same
-    slope from the other side, so in friction units (as the readers store it) its level
-    moves the other way at the same place. The two rows' filter responses
-    (:func:`local_evidence`'s filter along each, the retrace in the trace's x order)
-    therefore differ by twice the defect's response, while the noise of each direction is
-    its own: the evidence is ``ln`` of the largest ``|r_trace(x) - r_retrace(x - lag)| /
-    sqrt(2)`` over the mean std of the two rows' lattice-periodic profiles. One maximum
-    over positions, where two separate maxima (one per row) each pick their own noise.
-
-    The ``lag`` is where the two directions see the same spot: the tip trails the support
-    by its spring's stretch, ``<F>/K`` on average, behind in the trace and ahead in the
-    retrace, so the retrace's response sits ``2 <F>/K`` earlier along x.
-
-    Parameters
-    ----------
-    trace_nN, retrace_nN : ndarray (n,)
-        The two rows as the readers store them (the retrace reversed in x and
-        sign-flipped, reading as friction in its own scan direction).
-    period_px : float
-        Samples per lattice period.
-    lag_px : float
-        ``2 <F>/K`` in samples (0: the directions read at the same x).
-
-    Returns
-    -------
-    float
-        NaN where the rows differ in length, are not finite, or are no longer than
-        two periods.
-    """
-    t = np.asarray(trace_nN, float)
-    r = np.asarray(retrace_nN, float)[::-1]
-    n = t.size
-    if r.size != n or n <= 2 * period_px or not (np.isfinite(t).all() and np.isfinite(r).all()):
-        return float("nan")
-    F = np.stack([t, r])
-    R = _local_series(F, period_px)
-    s = int(round(lag_px)) if np.isfinite(lag_px) else 0
-    m = R.shape[1]  # the level series' length (both rows in the trace's x order)
-    s = max(-(m - 1), min(m - 1, s))
-    a, b = (R[0, s:], R[1, :m - s]) if s >= 0 else (R[0, :m + s], R[1, -s:])
-    d = np.abs(a - b)
-    if not np.isfinite(d).any():
-        return float("nan")
-    profile_std = float(_profile(F, period_px)[0].std(axis=1).mean())
-    return float(np.log(np.nanmax(d) / np.sqrt(2.0) / (profile_std + _TINY) + 1e-3))

@@ -68,15 +68,14 @@ Lines that break the pattern
   A surface defect lies at one physical position, seen in both scan directions (in a
   retrace row, which a reader stores reversed, at the mirrored position), while each
   direction's noise is its own: a line seen in both directions is judged for the local
-  anomaly by its *paired* score, against its own threshold
-  (``evidence_z["local_both"]``), and both rows are flagged. Where the rows carry
-  ``evidence_local_pair`` (the line model writes it for every trace/retrace pair:
-  :func:`~stickslip.estimators.evidence.paired_local_evidence`, the two directions'
-  responses compared at one position, the tip's lag between them allowed for), the
-  paired score is that column's robust score against the map's usable lines; else
-  ``(z_trace + z_retrace) / sqrt(2)`` of the two rows' own scores
-  (:func:`paired_scores`). A line seen in one direction (or whose other row has no
-  local evidence) keeps the one-direction rule.
+  anomaly by its *paired* score ``(z_trace + z_retrace) / sqrt(2)`` of its two rows'
+  robust scores (:func:`paired_scores`; each direction scored against its own usable
+  lines, over the whole map direction), against its own threshold
+  (``evidence_z["local_both"]``), and both rows are flagged; a line seen in one
+  direction (or whose other row has no local evidence) keeps the one-direction rule.
+  The position of the anomaly is not compared: the evidence column carries none, and
+  the tip's lag behind the support shifts a defect's response between the directions
+  by about twice the lag.
   The scale is the map's own, so no scale in nN or nm enters; rows without the columns
   (other estimators, older tables) are judged by their estimates only.
 - *A change along the slow scan axis* (a tip change, a domain of another material from
@@ -108,13 +107,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from stickslip.estimators.evidence import (
-    EVIDENCE,
-    EVIDENCE_COLUMNS,
-    LOCAL,
-    LOCAL_COLUMN,
-    LOCAL_PAIR_COLUMN,
-)
+from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS, LOCAL, LOCAL_COLUMN
 
 #: Pooled targets and whether each is pooled on a log scale.
 POOL_TARGETS: dict[str, bool] = {"F_mean_nN": False, "U0_eV": True, "K_N_m": True, "eta": True}
@@ -680,19 +673,15 @@ class _Lines:
     v: dict[str, np.ndarray]
     usable: np.ndarray
     e: np.ndarray  # (n, len(JUDGED_EVIDENCE)) the rows' evidence, NaN where a row has none
-    #: the rows' :data:`LOCAL_PAIR_COLUMN` (NaN where a row has none)
-    e_pair: np.ndarray | None = None
-    #: the line's local anomaly in both directions (:func:`_pair`); NaN where the line is
-    #: seen in one direction (or either row has no local evidence)
+    #: the line's local anomaly in both directions (:func:`paired_scores`); NaN where the
+    #: line is seen in one direction (or either row has no local evidence)
     paired: np.ndarray | None = None
 
     def take(self, sel: np.ndarray) -> _Lines:
-        def part(a: np.ndarray | None) -> np.ndarray | None:
-            return None if a is None else a[sel]
-
+        paired = None if self.paired is None else self.paired[sel]
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
                       {k: a[sel] for k, a in self.v.items()}, self.usable[sel],
-                      self.e[sel], part(self.e_pair), part(self.paired))  # fmt: skip
+                      self.e[sel], paired)  # fmt: skip
 
 
 def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
@@ -707,9 +696,8 @@ def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
     for key in JUDGED:
         usable &= np.isfinite(y[key]) & np.isfinite(v[key])
     e = np.array([[_num(r.get(c)) for c in JUDGED_EVIDENCE_COLUMNS] for r in sub], float)
-    e_pair = np.array([_num(r.get(LOCAL_PAIR_COLUMN)) for r in sub], float)
     return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable,
-                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)), e_pair)  # fmt: skip
+                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -945,25 +933,15 @@ def _local_scores(lines: _Lines) -> np.ndarray:
 
 def _pair(a: _Lines, b: _Lines) -> None:
     """Set ``paired`` of both directions' lines: the paired local score of every line
-    seen in both, over the whole map. Where the line's rows carry
-    :data:`LOCAL_PAIR_COLUMN`, its robust score against the usable lines of the map
-    that have it (a usable line: usable in both directions); else, or where fewer than
-    :data:`MIN_EVIDENCE_LINES` lines have it, :func:`paired_scores` of the two
-    directions' own scores (each against its own usable lines)."""
+    seen in both (each direction scored against its own usable lines, over the whole map
+    direction)."""
     za, zb = _local_scores(a), _local_scores(b)
     pos_b = {int(ln): i for i, ln in enumerate(b.line.tolist())}
-    both = [(i, k) for i, ln in enumerate(a.line.tolist())
-            if (k := pos_b.get(int(ln))) is not None]  # fmt: skip
     a.paired, b.paired = np.full(a.index.size, np.nan), np.full(b.index.size, np.nan)
-    if not both:
-        return
-    ia, ib = (np.array(v, int) for v in zip(*both, strict=True))
-    z = paired_scores(za[ia], zb[ib])
-    if a.e_pair is not None:
-        e = a.e_pair[ia]
-        zp = evidence_scores(e[:, None], a.usable[ia] & b.usable[ib])[:, 0]
-        z = np.where(np.isfinite(zp), zp, z)
-    a.paired[ia] = b.paired[ib] = z
+    for i, ln in enumerate(a.line.tolist()):
+        k = pos_b.get(int(ln))
+        if k is not None:
+            a.paired[i] = b.paired[k] = paired_scores(za[i], zb[k])
 
 
 def _map_lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> dict[str, _Lines]:

@@ -19,15 +19,9 @@ from stickslip.estimators.classical.estimator import (
     estimate_array,
 )
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
-from stickslip.estimators.evidence import (
-    EVIDENCE_COLUMNS,
-    LOCAL_COLUMN,
-    LOCAL_PAIR_COLUMN,
-    paired_local_evidence,
-)
+from stickslip.estimators.evidence import EVIDENCE_COLUMNS, LOCAL_COLUMN
 from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
 from stickslip.estimators.mapping import refusal
-from stickslip.estimators.pairs import find_pairs
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
 from stickslip.traces.trace import Trace
 
@@ -64,33 +58,6 @@ def pooled_features(ens: LineEnsemble, x_nm: Sequence[np.ndarray],
     pred = predict_raw_lines(ens, list(x_nm), list(force_nN), lattice_nm, velocity_nm_per_s,
                              features=True, temperature_K=temperature_K)  # fmt: skip
     return pred, pred.features
-
-
-def _pair_evidence(traces: Sequence[Trace], conditions: Sequence[Conditions],
-                   rows: list[dict[str, Any] | str]) -> None:  # fmt: skip
-    """Both rows of every trace/retrace pair (:func:`~stickslip.estimators.pairs.
-    find_pairs`) with estimates get :data:`LOCAL_PAIR_COLUMN`, the local anomaly read in
-    both directions at one position (:func:`~stickslip.estimators.evidence.
-    paired_local_evidence`), on the rows' own sampling. The two directions see a spot
-    ``2 <F>/K`` apart: the pair's friction (the mean of the two rows' mean forces; an
-    offset they share cancels) over the geometric mean of their K."""
-    for it, ir in find_pairs(traces):
-        a, b = rows[it], rows[ir]
-        if not (isinstance(a, dict) and isinstance(b, dict)):
-            continue
-        t, r = traces[it], traces[ir]
-        x = np.asarray(t.x_nm, float)
-        if x.size < 3 or np.asarray(r.x_nm).size != x.size:
-            continue
-        dx = abs(float(x[-1] - x[0])) / (x.size - 1)
-        K = float(np.sqrt(a["K_N_m"] * b["K_N_m"]))
-        if not (dx > 0 and K > 0):
-            continue
-        friction = 0.5 * (float(np.mean(t.force_nN)) + float(np.mean(r.force_nN)))
-        e = paired_local_evidence(t.force_nN, r.force_nN, conditions[it].lattice_nm / dx,
-                                  2.0 * friction / K / dx)  # fmt: skip
-        if np.isfinite(e):
-            a[LOCAL_PAIR_COLUMN] = b[LOCAL_PAIR_COLUMN] = e
 
 
 class LineEstimator(TraceEstimator):
@@ -171,7 +138,6 @@ class LineEstimator(TraceEstimator):
             if pred.local_evidence is not None:
                 row[LOCAL_COLUMN] = float(pred.local_evidence[j])
             out[i] = row
-        _pair_evidence(traces, conditions, out)
         if self.domain_verdict:
             self._check_stick_slip(traces, conditions, out)
         return out, notes
