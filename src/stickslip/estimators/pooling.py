@@ -137,11 +137,12 @@ EVIDENCE_TEXT = {"slow": "slow, non-periodic content (a drift or a step)", "spik
 EVIDENCE_REASON = "shows what the other lines of its map do not: "
 #: Robust score above which a line is flagged for an evidence, where the calibration
 #: file names none: each evidence's quantile, one for all, at which 1 % of the lines of
-#: seed 4211's 120 homogeneous maps exceed at least one (``benchmarks/map_pooling.py``;
+#: seed 4211's 384 homogeneous maps (96 parameter points) exceed at least one
+#: (``benchmarks/map_pooling.py``;
 #: ``local`` there counts the rows of one direction, as it judges lines seen in one).
 #: The spikes' scores have a long tail (a line's noise, drawn per line, sets how far its
 #: slips stand out of it).
-DEFAULT_EVIDENCE_Z = {"slow": 3.63, "spikes": 7.97, LOCAL: 2.89, LOCAL_BOTH: 3.12}
+DEFAULT_EVIDENCE_Z = {"slow": 3.61, "spikes": 8.59, LOCAL: 2.89, LOCAL_BOTH: 3.07}
 #: Fewest lines with evidence whose median and MAD may judge one of them.
 MIN_EVIDENCE_LINES = 8
 #: Least robust scale of an evidence (ln units, dimensionless): lines that agree closer
