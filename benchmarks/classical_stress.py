@@ -554,11 +554,15 @@ def clean_pt(work: Path, n: int, sim_seed: int | None = None) -> Dataset:
     return Dataset(F, x, params, {"kind": "clean-pt"})
 
 
-def afm_sets(work: Path, quick: bool) -> tuple[dict[str, tuple[Dataset, np.ndarray | None]],
-                                                dict[str, Dataset]]:  # fmt: skip
-    """The AFM sets with, for the tilted ones, each line's tilt in force ranges; and the
+AfmSets = dict[str, tuple[Dataset, np.ndarray | None]]
+
+
+def afm_sets(work: Path, quick: bool
+             ) -> tuple[AfmSets, dict[str, Dataset], dict[str, np.ndarray]]:  # fmt: skip
+    """The AFM sets with, for the tilted ones, each line's tilt in force ranges; the
     retrace rows of the sets scored as trace/retrace pairs (stored as a map reader
-    stores them: reversed in x and sign-flipped, the tilt not reversing with the scan)."""
+    stores them: reversed in x and sign-flipped, the tilt not reversing with the scan);
+    and, for the families sets, which families each line got (n, len(FAMILIES))."""
     n = N_AFM_QUICK if quick else N_AFM
     clean = clean_pt(work, n)
     Fc = np.asarray(clean.force_nN, float)
@@ -588,7 +592,9 @@ def afm_sets(work: Path, quick: bool) -> tuple[dict[str, tuple[Dataset, np.ndarr
             "bench + tilt, zero-mean": (_zero_mean_tilt(bench, bench_tilt), r_bench),
             "clean PT": (clean, None), "clean PT + tilt": (clean_tilt, r_clean),
             "clean PT + tilt, trace/retrace pairs": (clean_tilt, r_clean)}, {
-            "clean PT + tilt, trace/retrace pairs": retrace_tilt}
+            "clean PT + tilt, trace/retrace pairs": retrace_tilt}, {
+            name: fam.applied for name in ("families", "families + tilt",
+                                           "families + tilt, zero-mean")}  # fmt: skip
 
 
 def _zero_mean_tilt(clean: Dataset, tilted: Dataset) -> Dataset:
@@ -708,10 +714,12 @@ def _as_map_line(traces: list[Trace], direction: str) -> list[Trace]:
     return traces
 
 
-def score_afm(data: Dataset, est: ClassicalEstimator,
-              retrace: Dataset | None = None) -> dict[str, Any]:  # fmt: skip
+def score_afm(data: Dataset, est: ClassicalEstimator, retrace: Dataset | None = None,
+              applied: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
     """Answered fraction, rel. RMSE, median and 95th percentile of U0 and K (of the
-    trace rows, estimated beside their ``retrace`` rows where given)."""
+    trace rows, estimated beside their ``retrace`` rows where given); with ``applied``
+    (which effect families each line got), per family the K rel. RMSE of the answered
+    lines with it and without it (``K_by_family``), and the share of them answered."""
     ok = in_eta_window(data.params["eta"])
     traces = dataset_traces(data, rows=np.flatnonzero(ok))
     if retrace is not None:
@@ -729,6 +737,18 @@ def score_afm(data: Dataset, est: ClassicalEstimator,
         out[f"{name}_median"] = float(np.median(a)) if a.size else np.nan
         out[f"{name}_p95"] = float(np.percentile(a, 95)) if a.size else np.nan
     out["refusals"] = dict(collections.Counter(r["quality"] for r in rows if r["quality"] != "ok"))
+    if applied is not None:
+        got = np.array([r.get("K_N_m", np.nan) for r in rows], dtype=float)
+        rel = np.where(answered, got / np.asarray(data.params["K_N_m"], float)[ok] - 1.0, np.nan)
+        A = np.asarray(applied, bool)[ok]
+
+        def rmse(m: np.ndarray) -> float:
+            v = rel[m & answered]
+            return float(np.sqrt(np.mean(v**2))) if v.size else np.nan
+
+        out["K_by_family"] = {f: {"n": int(A[:, j].sum()), "answered": _frac(answered[A[:, j]]),
+                                  "with": rmse(A[:, j]), "without": rmse(~A[:, j])}
+                              for j, f in enumerate(fx.FAMILIES) if A[:, j].any()}  # fmt: skip
     return out
 
 
@@ -788,6 +808,13 @@ def print_afm(res: dict) -> None:
         print(f"  {name:18s} {r['n']:4d} {_pct(r['answered'])} {_pct(r['K_rel_rmse']):>8s} "
               f"{_pct(r['K_median'])} {_pct(r['K_p95'])} {_pct(r['U0_rel_rmse']):>8s} "
               f"{_pct(r['U0_median'])} {_pct(r['U0_p95'])}  {reasons}")  # fmt: skip
+    for name, r in res.items():
+        if "K_by_family" in r:
+            print(f"  {name}: K rel. RMSE of the answered lines with / without each family "
+                  "(lines with it, share answered): " + "; ".join(
+                      f"{f} {_pct(v['with']).strip()} / {_pct(v['without']).strip()} "
+                      f"({v['n']}, {_pct(v['answered']).strip()})"
+                      for f, v in r["K_by_family"].items()))  # fmt: skip
 
 
 def machine() -> dict[str, Any]:
@@ -854,12 +881,12 @@ def main() -> None:
     afm: dict[str, Any] = {}
     if not args.no_afm:
         t2 = time.perf_counter()
-        sets, retraces = afm_sets(args.work, args.quick)
+        sets, retraces, applied = afm_sets(args.work, args.quick)
         print(f"\nAFM sets ready in {time.perf_counter() - t2:.1f} s")
         ce = ClassicalEstimator()
         t3 = time.perf_counter()
         for name, (data, _) in sets.items():
-            afm[name] = score_afm(data, ce, retraces.get(name))
+            afm[name] = score_afm(data, ce, retraces.get(name), applied.get(name))
         print_afm(afm)
         print(f"  (estimated in {time.perf_counter() - t3:.1f} s)")
     total = time.perf_counter() - t0
