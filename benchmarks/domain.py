@@ -16,13 +16,13 @@ bench on seed ``BENCH_SEED + 1``, the figures are reported on other seeds):
   ``"eval"`` implementation, every family at its documented probability).
 
 Prints, per set, the fraction of rows in domain with the line model (the default) and
-the classical estimator, the reasons given; on the sets with truths, the factor by which
-the line model's out-of-domain rows' 95 % intervals had to be widened to cover 95 % of
-the truths (the verdict's widening factors are chosen from it on seed 1); and
-the line model's throughput
-(:meth:`LineEstimator.predict` on ``--n-speed`` traces) with and without the verdict,
-timed alternately in the same sitting, and the machine. Sets are cached under
-``--work`` (default build/domain, git-ignored).
+the classical estimator, the reasons given, and the smooth-sliding rows in domain per
+band of their true eta (clean and lab-effect lines apart); on the sets with truths, the
+factor by which the line model's out-of-domain rows' 95 % intervals had to be widened to
+cover 95 % of the truths (the verdict's widening factors are chosen from it on seed 1);
+and the line model's throughput (:meth:`LineEstimator.predict` on ``--n-speed`` traces)
+with and without the verdict, timed alternately in the same sitting, and the machine.
+Sets are cached under ``--work`` (default build/domain, git-ignored).
 
 Usage: python benchmarks/domain.py [--seed 2] [--bench-seed 20261121] [--n 200]
        [--n-speed 5000] [--repeats 3] [--threads 2] [--work build/domain] [--skip-speed]
@@ -319,6 +319,24 @@ def print_rates(label: str, res: dict[str, tuple[float, Counter]]) -> None:
     print(f"  {'non-PT overall':<18}{non:>7.3f}   (out of domain: {1 - non:.3f})")
 
 
+def smooth_by_eta(estimator, traces: list[Trace], label: str,
+                  bands: tuple[float, ...] = (0.2, 0.5, 0.7, 0.8, 0.9, 0.95)) -> None:  # fmt: skip
+    """The smooth-sliding set's rows in domain per band of their true eta, the clean
+    lines (even rows) and those with the lab bench's effects (odd rows) apart: where
+    smooth sliding passes for stick-slip."""
+    rows = estimator.predict(traces).rows
+    inside = np.array([domain_verdict(r) is True for r in rows])
+    eta = np.array([t.meta["eta"] for t in traces])
+    lab = np.arange(len(traces)) % 2 == 1
+    cells = []
+    for lo, hi in zip(bands[:-1], bands[1:], strict=False):
+        m = (eta >= lo) & (eta < hi)
+        parts = [f"{inside[m & sel].mean():.2f} of {int((m & sel).sum())}" if (m & sel).any()
+                 else "none" for sel in (~lab, lab)]  # fmt: skip
+        cells.append(f"eta {lo:g}-{hi:g}: clean {parts[0]}, lab {parts[1]}")
+    print(f"  smooth sliding in domain by true eta ({label}): " + "; ".join(cells))
+
+
 def widening_needed(estimator, sets: dict[str, list[Trace]]) -> None:
     """Per set with truths: how far the 95 % intervals of its out-of-domain rows had to
     be widened to cover 95 % of the truths, as a factor on the calibrated half-width
@@ -416,7 +434,10 @@ def main() -> None:
     print(f"sets of seed {args.seed} ({args.n} traces each), lab bench of seed "
           f"{args.bench_seed} ({len(sets['lab_bench'])} traces)")
     print_rates("line model (bundled)", rates(line, sets))
-    print_rates("classical estimator", rates(ClassicalEstimator(), sets))
+    smooth_by_eta(line, sets["smooth_sliding"], "line model")
+    classical = ClassicalEstimator()
+    print_rates("classical estimator", rates(classical, sets))
+    smooth_by_eta(classical, sets["smooth_sliding"], "classical estimator")
     widening_needed(line, {k: v for k, v in sets.items() if k in TRUTH_SETS})
     if not args.skip_speed:
         speed(line, args.n_speed, args.repeats, args.work)
