@@ -729,21 +729,22 @@ def score_afm(data: Dataset, est: ClassicalEstimator, retrace: Dataset | None = 
     answered = np.array([r["quality"] == "ok" and np.isfinite(r["K_N_m"])
                          and np.isfinite(r["U0_eV"]) for r in rows], dtype=bool)  # fmt: skip
     out: dict[str, Any] = {"n": len(rows), "answered": _frac(answered)}
+    rel_K = np.full(len(rows), np.nan)  # each row's K rel. error (NaN where not answered)
     for key, name in (("K_N_m", "K"), ("U0_eV", "U0")):
         got = np.array([r.get(key, np.nan) for r in rows], dtype=float)[answered]
         rel = got / np.asarray(data.params[key], float)[ok][answered] - 1.0
+        if key == "K_N_m":
+            rel_K[answered] = rel
         a = np.abs(rel)
         out[f"{name}_rel_rmse"] = float(np.sqrt(np.mean(rel**2))) if rel.size else np.nan
         out[f"{name}_median"] = float(np.median(a)) if a.size else np.nan
         out[f"{name}_p95"] = float(np.percentile(a, 95)) if a.size else np.nan
     out["refusals"] = dict(collections.Counter(r["quality"] for r in rows if r["quality"] != "ok"))
     if applied is not None:
-        got = np.array([r.get("K_N_m", np.nan) for r in rows], dtype=float)
-        rel = np.where(answered, got / np.asarray(data.params["K_N_m"], float)[ok] - 1.0, np.nan)
         A = np.asarray(applied, bool)[ok]
 
         def rmse(m: np.ndarray) -> float:
-            v = rel[m & answered]
+            v = rel_K[m & answered]
             return float(np.sqrt(np.mean(v**2))) if v.size else np.nan
 
         out["K_by_family"] = {f: {"n": int(A[:, j].sum()), "answered": _frac(answered[A[:, j]]),

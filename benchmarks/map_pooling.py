@@ -120,8 +120,8 @@ UNION = ("slow", "spikes", pl.LOCAL_BOTH)
 # ---------------------------------------------------------------------------- line pools
 
 
-def _points(seed: int, n: int = N_POINTS, stream: int = 1) -> np.ndarray:
-    rng = np.random.default_rng([seed, stream])
+def _points(seed: int, n: int = N_POINTS) -> np.ndarray:
+    rng = np.random.default_rng([seed, 1])
     out = []
     while len(out) < n:
         U0, K = math.exp(rng.uniform(math.log(0.5), math.log(3.0))), \
@@ -135,28 +135,36 @@ def _sim(U0: np.ndarray, K: np.ndarray, seed: int, defects=None) -> np.ndarray:
     return simulate(U0, K, PhysicalSettings(), seed=seed, defects=defects).force_nN
 
 
-def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
-    """Clean lines of the set (cached in ``work`` under :data:`POOLS_CACHE`; ``smooth``:
-    with the smooth maps' lines)."""
-    path = work / POOLS_CACHE.format(seed=seed)
+def _cached(path: Path, make, what: str) -> dict[str, np.ndarray]:
+    """The arrays cached at ``path``, or ``make()``'s, simulated (timed) and saved there."""
     if path.exists():
-        out = dict(np.load(path))
-        if "smooth" in out or not smooth:
-            return out
-    pts = _points(seed)
-    rng = np.random.default_rng([seed, 2])
-    # partners: U0 x1.4 / x0.7 (tip change) and K x1.4 / x0.65 (domain)
-    uf = rng.choice([1.4, 0.7], N_POINTS)
-    kf = rng.choice([1.4, 0.65], N_POINTS)
-    out: dict[str, np.ndarray] = {"points": pts, "u_factor": uf, "k_factor": kf}
-    rep = np.repeat
+        return dict(np.load(path))
     t0 = time.time()
-    out["base"] = _sim(rep(pts[:, 0], POOL), rep(pts[:, 1], POOL), seed).reshape(N_POINTS, POOL, -1)
-    out["tip"] = _sim(rep(pts[:, 0] * uf, PARTNER_POOL), rep(pts[:, 1], PARTNER_POOL),
-                      seed + 1).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
-    out["domain"] = _sim(rep(pts[:, 0], PARTNER_POOL), rep(pts[:, 1] * kf, PARTNER_POOL),
-                         seed + 2).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
-    if smooth:
+    out = make()
+    print(f"simulated {what} in {time.time() - t0:.0f} s")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **out)
+    return out
+
+
+def pools(seed: int, work: Path) -> dict[str, np.ndarray]:
+    """Clean lines of the set: per parameter point, its own, the change partners' and the
+    smooth maps' (cached in ``work`` under :data:`POOLS_CACHE`)."""
+
+    def make() -> dict[str, np.ndarray]:
+        pts = _points(seed)
+        rng = np.random.default_rng([seed, 2])
+        # partners: U0 x1.4 / x0.7 (tip change) and K x1.4 / x0.65 (domain)
+        uf = rng.choice([1.4, 0.7], N_POINTS)
+        kf = rng.choice([1.4, 0.65], N_POINTS)
+        out: dict[str, np.ndarray] = {"points": pts, "u_factor": uf, "k_factor": kf}
+        rep = np.repeat
+        out["base"] = _sim(rep(pts[:, 0], POOL), rep(pts[:, 1], POOL),
+                           seed).reshape(N_POINTS, POOL, -1)  # fmt: skip
+        out["tip"] = _sim(rep(pts[:, 0] * uf, PARTNER_POOL), rep(pts[:, 1], PARTNER_POOL),
+                          seed + 1).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
+        out["domain"] = _sim(rep(pts[:, 0], PARTNER_POOL), rep(pts[:, 1] * kf, PARTNER_POOL),
+                             seed + 2).reshape(N_POINTS, PARTNER_POOL, -1)  # fmt: skip
         k = 3
         phase = rng.uniform(0, 2 * np.pi, k)
         i = np.arange(SMOOTH_POOL)
@@ -165,32 +173,22 @@ def pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
         out["smooth"] = _sim(U0s, rep(pts[:k, 1], SMOOTH_POOL), seed + 4).reshape(
             k, SMOOTH_POOL, -1)
         out["smooth_U0"] = U0s.reshape(k, SMOOTH_POOL)
-    print(f"simulated the pools of seed {seed} in {time.time() - t0:.0f} s")
-    work.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **out)
-    return out
+        return out
+
+    return _cached(work / POOLS_CACHE.format(seed=seed), make, f"the pools of seed {seed}")
 
 
 def calibration_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
     """The calibration set's clean lines (cached in ``work`` under :data:`CAL_CACHE`):
     :data:`CAL_POINTS` parameter points of :data:`POOL` lines each."""
-    path = work / CAL_CACHE.format(seed=seed)
-    if path.exists():
-        return dict(np.load(path))
-    pts = _points(seed, CAL_POINTS)
-    t0 = time.time()
-    base = _sim(np.repeat(pts[:, 0], POOL), np.repeat(pts[:, 1], POOL), seed)
-    out = {"points": pts, "base": base.reshape(CAL_POINTS, POOL, -1)}
-    print(f"simulated the calibration lines of seed {seed} in {time.time() - t0:.0f} s")
-    work.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **out)
-    return out
 
+    def make() -> dict[str, np.ndarray]:
+        pts = _points(seed, CAL_POINTS)
+        base = _sim(np.repeat(pts[:, 0], POOL), np.repeat(pts[:, 1], POOL), seed)
+        return {"points": pts, "base": base.reshape(CAL_POINTS, POOL, -1)}
 
-def _defect_positions(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 2) substrate positions of a defect line's two defects, nm: 5-11 nm of the
-    substrate (the recorded window starts at the warm-up, 1-2 nm)."""
-    return rng.uniform(3.0, 9.0, (n, 2)) + 2.0
+    return _cached(work / CAL_CACHE.format(seed=seed), make,
+                   f"the calibration lines of seed {seed}")  # fmt: skip
 
 
 def _defect_lines(U0: np.ndarray, K: np.ndarray, xs: np.ndarray, seed: int
@@ -212,26 +210,24 @@ def _defect_lines(U0: np.ndarray, K: np.ndarray, xs: np.ndarray, seed: int
 
 def defect_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
     """The set's defect lines (cached in ``work`` under :data:`DEFECT_CACHE`):
-    :data:`DEFECT_POOL` per parameter point (:func:`_defect_lines`)."""
-    path = work / DEFECT_CACHE.format(seed=seed)
-    if path.exists():
-        return dict(np.load(path))
-    pts = _points(seed)
-    rng = np.random.default_rng([seed, 6])
-    t0 = time.time()
-    rep = np.repeat
-    lines = _defect_lines(rep(pts[:, 0], DEFECT_POOL), rep(pts[:, 1], DEFECT_POOL),
-                          _defect_positions(rng, N_POINTS * DEFECT_POOL), seed)  # fmt: skip
-    out = {k: v.reshape(N_POINTS, DEFECT_POOL, *v.shape[1:]) for k, v in lines.items()}
-    print(f"simulated the defect lines of seed {seed} in {time.time() - t0:.0f} s")
-    work.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **out)
-    return out
+    :data:`DEFECT_POOL` per parameter point (:func:`_defect_lines`), each crossing two
+    defects at 5-11 nm of the substrate (the recorded window starts at the warm-up,
+    1-2 nm)."""
+
+    def make() -> dict[str, np.ndarray]:
+        pts = _points(seed)
+        rep = np.repeat
+        xs = np.random.default_rng([seed, 6]).uniform(3.0, 9.0, (N_POINTS * DEFECT_POOL, 2)) + 2.0
+        lines = _defect_lines(rep(pts[:, 0], DEFECT_POOL), rep(pts[:, 1], DEFECT_POOL), xs, seed)
+        return {k: v.reshape(N_POINTS, DEFECT_POOL, *v.shape[1:]) for k, v in lines.items()}
+
+    return _cached(work / DEFECT_CACHE.format(seed=seed), make,
+                   f"the defect lines of seed {seed}")  # fmt: skip
 
 
-def line_pools(seed: int, work: Path, smooth: bool) -> dict[str, np.ndarray]:
+def line_pools(seed: int, work: Path) -> dict[str, np.ndarray]:
     """:func:`pools` and :func:`defect_pools` of the set together."""
-    return {**pools(seed, work, smooth), **defect_pools(seed, work)}
+    return {**pools(seed, work), **defect_pools(seed, work)}
 
 
 # ---------------------------------------------------------------------------- maps
@@ -563,7 +559,7 @@ def main() -> None:
         print(f"seed {seed} was scored before: these figures are not held out")
     elif seed != SCORE_SEED:
         print(f"scored on seed {seed} (the next fresh scoring set is {SCORE_SEED})")
-    P = line_pools(seed, args.work, smooth=True)
+    P = line_pools(seed, args.work)
     homo = run_maps("homogeneous", args.maps, P, seed, est, cal)
     print(f"\n== homogeneous maps (seed {seed}): {len(homo)} maps, "
           f"{sum(m['n'] for m in homo)} lines per direction")  # fmt: skip
