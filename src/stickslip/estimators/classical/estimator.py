@@ -21,7 +21,8 @@ Quality flags (``quality``): ``ok``; ``too few slips``; ``smooth sliding`` (the 
 cycles, but falls no faster than it rises: smooth sliding, or a slider that oscillates
 without sticking); ``not stick-slip`` (the force jumps up, as well as or instead of
 down); ``too noisy`` (nothing stands out of the noise, or the noise is a large fraction
-of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak);
+of the drops); ``inconsistent slopes`` (no positive K fits the slopes and the peak, or the slopes of
+fewer than two sticks do);
 ``sticks disagree`` (the sticks' own K's scatter by more than :data:`MAX_K_SPREAD` of
 the line's K: no one spring fits them; or the slip levels show a baseline left in the
 sticks, :data:`LEVEL_AGREEMENT`); ``two regimes`` (the sticks' slope changes part-way:
@@ -269,6 +270,9 @@ def _estimate_core(x: np.ndarray, F: np.ndarray, G: np.ndarray, segs: np.ndarray
         out[STATUS] = STICKS_DISAGREE  # the slip levels trend: a baseline left in
         return
     k_spread = _spread(Kseg)
+    if np.isnan(k_spread):  # one stick at most whose slope fits the peak: no spread, no K
+        out[STATUS] = 4
+        return
     if k_spread > MAX_K_SPREAD * K:
         out[STATUS] = STICKS_DISAGREE
         return
