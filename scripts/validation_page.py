@@ -68,11 +68,14 @@ def _pooling(doc: dict) -> list[str]:
              f"The systematic floor `sigma_sys` of the pooled interval, calibrated on "
              f"{cfg['calibration_maps']} simulated maps (seed {cfg['calibration_seed']}; "
              f"target: {cfg['target']}).", "",
-             "| direction | <F> (relative) | ln U0 | ln K | ln eta | command | date |",
+             "| direction | <F> (relative; nN, in quadrature) | ln U0 | ln K | ln eta | "
+             "command | date |",
              "|---|---|---|---|---|---|---|"]
+    floor_nN = doc.get("floor_nN", {})  # files before the absolute part have none
     for key, label in (("single", "one direction"), ("both", "trace and retrace")):
         s = doc[key]
-        lines.append(f"| {label} | {s['F_mean_nN']} | {s['U0_eV']} | {s['K_N_m']} | "
+        F = f"{s['F_mean_nN']}" + (f"; {floor_nN[key]} nN" if key in floor_nN else "")
+        lines.append(f"| {label} | {F} | {s['U0_eV']} | {s['K_N_m']} | "
                      f"{s['eta']} | {cmd} | {cfg['date']} |")
     return [*lines, ""]
 

@@ -87,6 +87,39 @@ def test_systematic_floor_keeps_coverage_when_lines_share_an_error():
     assert 0.92 <= _coverage(0.05) <= 0.98
 
 
+def _friction_coverage(friction_nN: float, sys_rel: float, sys_abs: float, n_maps=400,
+                       offset_nN=0.3, seed=4236) -> float:  # fmt: skip
+    """Pooled <F> coverage of maps whose lines share an offset of the same size whatever
+    the friction (as a crosstalk offset in one scan direction)."""
+    rng = np.random.default_rng(seed)
+    hits = 0
+    for _ in range(n_maps):
+        b = rng.normal(0, offset_nN)
+        sd = rng.uniform(0.05, 0.15, 128)
+        p = pl.pool_target(friction_nN + b + rng.normal(0, sd), sd * sd, sys_rel, False, sys_abs)
+        hits += abs(p.mu - friction_nN) <= pl.Z95 * p.se
+    return hits / n_maps
+
+
+def test_friction_floor_has_an_absolute_part():
+    # an offset in nN: a floor relative to <F> covers high friction, not low
+    assert _friction_coverage(0.5, 0.6, 0.0) < 0.85 < 0.99 <= _friction_coverage(5.0, 0.6, 0.0)
+    # the absolute part covers both alike
+    for friction in (0.5, 5.0):
+        assert 0.92 <= _friction_coverage(friction, 0.0, 0.3) <= 0.98
+    # the floor adds in quadrature to the statistical error
+    p = pl.pool_target(np.full(4, 2.0), np.full(4, 0.04), 0.1, False, 0.3)
+    assert p.sys == pytest.approx(math.hypot(0.3, 0.2))
+    assert pl.pool_target(np.full(4, 2.0), np.full(4, 0.04), 0.1, True, 0.3).sys == 0.1
+
+
+def test_calibration_without_the_absolute_part_reads_as_relative_only():
+    old = {k: v for k, v in pl.bundled_calibration().to_dict().items()
+           if k not in ("sys_single_nN", "sys_both_nN")}  # a file written before it
+    cal = pl.PoolingCalibration.from_dict(old)
+    assert cal.sys_nN("trace") == cal.sys_nN(pl.BOTH) == 0.0
+
+
 # ---------------------------------------------------------------------------- lines
 
 
@@ -192,6 +225,20 @@ def test_change_point_pools_either_side():
     after = next(g for g in groups if g["segment"] == "after" and g["direction"] == "both")
     assert before["U0_eV"] == pytest.approx(1.5, rel=0.05)
     assert after["U0_eV"] == pytest.approx(2.1, rel=0.05)
+
+
+def test_a_change_into_lines_out_of_domain_is_found():
+    # a domain of another material whose lines the verdict leaves out: they pool nothing,
+    # but their estimates still place the change
+    rows = _map_rows(n=96, change=40)
+    for r in rows:
+        if r["line"] >= 40 and (r["line"] - 40) % 32:
+            r["in_domain"] = False  # two lines after the change left in domain
+    groups = pl.group_table(rows, CAL)
+    whole = [g for g in groups if g["segment"] == "all"]
+    assert all(abs(g["change_line"] - 40) <= 3 for g in whole)
+    after = next(g for g in groups if g["segment"] == "after" and g["direction"] == "both")
+    assert after["n_lines"] == 4  # lines 40 and 72, both directions
 
 
 def test_table_groups_frame_has_the_columns():
@@ -417,3 +464,33 @@ def test_a_line_seen_in_one_direction_keeps_the_one_direction_rule():
         if r["direction"] == "retrace" and r["line"] == 40:
             r["evidence_local"] = None
     assert _why(both, pl.pool_groups(both, CAL_E)) == {("trace", 40): single}
+
+
+def test_change_threshold_batches_draw_the_same_series():
+    # the Monte Carlo draws its series in batches, in the order one at a time would
+    rng = np.random.default_rng([4299, 40, 3, 4])
+    one_by_one = [np.nanmax(pl.change_statistic(rng.standard_normal((40, 3)), 4))
+                  for _ in range(300)]  # fmt: skip
+    pl.change_threshold.cache_clear()
+    assert pl.change_threshold(40, 3, 0.9, 4, reps=300) == pytest.approx(
+        float(np.quantile(one_by_one, 0.9)), rel=1e-12)
+
+
+def test_tabled_change_threshold_matches_the_monte_carlo_between_grid_points():
+    table = {"level": 0.99, "min_segment": 4, "n": [64, 128],
+             "3": [pl.change_threshold(64, 3, 0.99, 4), pl.change_threshold(128, 3, 0.99, 4)]}
+    direct = pl.change_threshold(96, 3, 0.99, 4)
+    assert pl._tabled_threshold(table, 96, 3, 0.99, 4) == pytest.approx(direct, rel=0.05)
+    # at a grid point exactly the Monte Carlo's; outside the table, or for another
+    # level, the Monte Carlo itself
+    assert pl._tabled_threshold(table, 64, 3, 0.99, 4) == pl.change_threshold(64, 3, 0.99, 4)
+    assert pl._tabled_threshold(table, 40, 3, 0.99, 4) == pl.change_threshold(40, 3, 0.99, 4)
+    assert pl._tabled_threshold(table, 96, 3, 0.95, 4) == pl.change_threshold(96, 3, 0.95, 4)
+
+
+def test_bundled_calibration_tables_the_change_threshold():
+    cal = pl.bundled_calibration()
+    t = cal.change_table
+    assert t["level"] == cal.change_level and t["min_segment"] == cal.min_segment
+    assert t["n"][0] <= 8 and t["n"][-1] >= 1024 and {"3", "6"} <= set(t)
+    assert np.all(np.diff(t["3"]) > -0.5)  # grows with n, up to the Monte Carlo's noise

@@ -34,7 +34,13 @@ so the interval of a 512-line map shrinks like ``1/sqrt(N)`` only down to the fl
 ``sigma_sys``. ``sigma_sys`` (per target, for one direction and for both) was calibrated
 on simulated maps that carry such shared effects (``benchmarks/map_pooling.py``) and is
 stored with the configuration that made it in ``stickslip/resources/map_pooling.json``
-(:class:`PoolingCalibration`). For <F> the floor is relative (``sigma_sys * |<F>|``).
+(:class:`PoolingCalibration`). For <F> the floor has two parts,
+``sigma_sys^2 = s_nN^2 + (s_rel |<F>|)^2``: an absolute one in nN (in one scan direction
+mostly the crosstalk offset, the same few tenths of a nN whatever the friction) and a
+relative one (the lateral calibration, the stated conditions). A floor relative to
+<F> alone made the intervals of low-friction maps too narrow and those of
+high-friction maps too wide, so that the coverage of a set of maps depended on its
+friction levels.
 
 The trace and retrace of a map are pooled each on its own, and ``both`` is their mean
 (geometric mean for the log targets): an offset that does not reverse with the scan
@@ -80,7 +86,10 @@ Lines that break the pattern
   (other estimators, older tables) are judged by their estimates only.
 - *A change along the slow scan axis* (a tip change, a domain of another material from
   some line on): a two-segment Gaussian mean-shift model on the lines' estimates in
-  line order (ln U0, ln K, <F> relative to its median; winsorised at 4 robust standard deviations),
+  line order (every line with an estimate, in domain or not: the lines of another
+  material may lie outside the trained domain, which leaves out of the pool but does
+  not hide the change; ln U0, ln K, <F> relative to its median; winsorised at 4 robust
+  standard deviations),
   the likelihood ratio ``sum_j n ln(RSS0_j / RSS1_j(k))`` maximised over the split ``k``
   (segments of at least :attr:`PoolingCalibration.min_segment` lines), compared with the
   ``change_level`` quantile of its distribution on homogeneous (independent Gaussian)
@@ -172,6 +181,9 @@ class PoolingCalibration:
         eta; relative to ``|<F>|`` for <F>.
     sys_both : dict of str to float
         The same for trace and retrace pooled together.
+    sys_single_nN, sys_both_nN : float
+        The absolute part of <F>'s floor, nN (one direction; both): ``sigma_sys`` of <F>
+        is ``hypot(sys_nN, sys_rel |<F>|)`` (0: relative only).
     flag_z : float
         Half-width of the predictive interval, in standard deviations, outside which a
         line is flagged.
@@ -184,6 +196,9 @@ class PoolingCalibration:
         Smallest change reported: the two sides' means must differ by at least this in
         ln U0, ln K or <F> relative to its median (0.1: 10 %); a smaller shift on a
         large map is significant but no change of contact.
+    change_table : dict
+        The change threshold precomputed on a grid of group sizes
+        (:func:`threshold_table`; empty: computed when a group needs it).
     evidence_z : dict of str to float
         Per evidence (:data:`JUDGED_EVIDENCE`), the robust score
         (:func:`evidence_scores`) above which a line is flagged as showing what the other
@@ -197,17 +212,24 @@ class PoolingCalibration:
 
     sys_single: dict[str, float] = field(default_factory=lambda: dict.fromkeys(POOL_TARGETS, 0.05))
     sys_both: dict[str, float] = field(default_factory=lambda: dict.fromkeys(POOL_TARGETS, 0.05))
+    sys_single_nN: float = 0.0
+    sys_both_nN: float = 0.0
     flag_z: float = 3.5
     change_level: float = 0.99
     min_segment: int = 4
     min_shift: float = 0.1
     evidence_z: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_EVIDENCE_Z))
+    change_table: dict[str, Any] = field(default_factory=dict)
     config: dict[str, Any] = field(default_factory=dict)
 
     def sys(self, key: str, direction: str) -> float:
         """``sigma_sys`` of a target for a direction (``trace``, ``retrace`` or ``both``)."""
         table = self.sys_both if direction == BOTH else self.sys_single
         return float(table.get(key, 0.0))
+
+    def sys_nN(self, direction: str) -> float:
+        """The absolute part of <F>'s floor (nN) for a direction."""
+        return float(self.sys_both_nN if direction == BOTH else self.sys_single_nN)
 
     def evidence_threshold(self) -> np.ndarray:
         """:attr:`evidence_z` in the order of :data:`JUDGED_EVIDENCE`."""
@@ -566,16 +588,75 @@ def change_statistic(Y: np.ndarray, min_segment: int) -> np.ndarray:
     return out
 
 
+def _max_statistics(Y: np.ndarray, min_segment: int) -> np.ndarray:
+    """``max_k S(k)`` (:func:`change_statistic`) of each of a batch of series ``Y``
+    (r, n, p), at once."""
+    r, n, _ = Y.shape
+    c1 = np.cumsum(Y, axis=1)
+    c2 = np.cumsum(Y * Y, axis=1)
+    tot1, tot2 = c1[:, -1:], c2[:, -1:]
+    rss0 = np.maximum(tot2 - tot1 * tot1 / n, 1e-300)
+    k = np.arange(min_segment, n - min_segment + 1)
+    a1, a2 = c1[:, k - 1], c2[:, k - 1]
+    kk = k[None, :, None].astype(float)
+    rss1 = (a2 - a1 * a1 / kk) + ((tot2 - a2) - (tot1 - a1) ** 2 / (n - kk))
+    s = n * np.log(rss0 / np.maximum(rss1, 1e-300))
+    return np.where(np.isfinite(s), s, 0.0).sum(axis=2).max(axis=1)
+
+
 @lru_cache(maxsize=256)
 def change_threshold(n: int, p: int, level: float, min_segment: int, reps: int = 2000) -> float:
     """The ``level`` quantile of ``max_k S(k)`` on ``n`` independent Gaussian rows of ``p``
     columns (Monte Carlo, seed 4299, cached): the false-alarm threshold for a
-    homogeneous group."""
+    homogeneous group. Batches of series at once, drawn in the order one at a time
+    would draw them (the same numbers)."""
     rng = np.random.default_rng([4299, n, p, min_segment])
-    best = np.empty(reps)
-    for r in range(reps):
-        best[r] = np.nanmax(change_statistic(rng.standard_normal((n, p)), min_segment))
+    chunk = max(1, min(reps, 2_000_000 // max(n * p, 1)))
+    best = np.concatenate([_max_statistics(rng.standard_normal((min(chunk, reps - a), n, p)),
+                                           min_segment)
+                           for a in range(0, reps, chunk)])  # fmt: skip
     return float(np.quantile(best, level))
+
+
+#: Group sizes at which :func:`threshold_table` holds the change threshold (between them
+#: it is interpolated in ln n; the quantile grows slowly and smoothly with n).
+THRESHOLD_GRID = (8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 112, 128, 160,
+                  192, 224, 256, 320, 384, 448, 512, 640, 768, 896, 1024, 1280, 1536, 2048)
+
+
+def threshold_table(level: float, min_segment: int, columns: Sequence[int] = (3, 6),
+                    reps: int = 20000) -> dict[str, Any]:  # fmt: skip
+    """The change threshold on :data:`THRESHOLD_GRID` for ``columns`` (one direction's
+    judged targets, and both directions' side by side), to ship with the calibration:
+    the Monte Carlo of a group of hundreds of lines costs more than the rest of the
+    pooling, and a map's groups (each direction, both) each have their own size.
+
+    Per column count, :func:`change_threshold` with ``reps`` series at every size, then a
+    quadratic in ln n fitted to them by least squares, whose values the table holds: the
+    quantile grows slowly and smoothly with n, and the fit averages out the Monte Carlo's
+    noise (at 2,000 series per size the 0.99 quantile scatters by several percent from
+    one size to the next)."""
+    grid = np.asarray(THRESHOLD_GRID, float)
+    out: dict[str, Any] = {"level": level, "min_segment": min_segment, "reps": reps,
+                           "n": list(THRESHOLD_GRID)}  # fmt: skip
+    for p in columns:
+        raw = [change_threshold(int(n), p, level, min_segment, reps) for n in grid]
+        coef = np.polyfit(np.log(grid), raw, 2)
+        out[str(p)] = [round(float(v), 5) for v in np.polyval(coef, np.log(grid))]
+    return out
+
+
+def _tabled_threshold(table: Mapping[str, Any] | None, n: int, p: int, level: float,
+                      min_segment: int) -> float:  # fmt: skip
+    """The change threshold from ``table`` (:func:`threshold_table`) where it was made for
+    this ``level`` and ``min_segment`` and holds ``p`` columns and the size ``n``
+    (interpolated in ln n), else :func:`change_threshold`."""
+    if (table and table.get("level") == level and table.get("min_segment") == min_segment
+            and str(p) in table):  # fmt: skip
+        grid = np.asarray(table["n"], float)
+        if grid[0] <= n <= grid[-1]:
+            return float(np.interp(math.log(n), np.log(grid), np.asarray(table[str(p)], float)))
+    return change_threshold(n, p, level, min_segment)
 
 
 @dataclass(frozen=True)
@@ -589,14 +670,15 @@ class ChangePoint:
 
 
 def find_change(Y: np.ndarray, level: float = 0.99, min_segment: int = 4,
-                min_shift: float = 0.0) -> ChangePoint:
+                min_shift: float = 0.0, table: Mapping[str, Any] | None = None) -> ChangePoint:
     """The most likely single change point of the rows of ``Y`` (n, p), in line order.
 
     Columns are winsorised at 4 robust standard deviations (so a burst of a few wild
     lines cannot pose as a change) and rows with a NaN dropped by the caller. A change is
     reported where ``max_k S(k)`` (:func:`change_statistic`) exceeds
-    :func:`change_threshold` at ``level`` and the two sides' means differ by at least
-    ``min_shift`` in some column.
+    :func:`change_threshold` at ``level`` (read from ``table``, :func:`threshold_table`,
+    where it holds the case) and the two sides' means differ by at least ``min_shift``
+    in some column.
     """
     Y = np.asarray(Y, float)
     if Y.ndim == 1:
@@ -607,7 +689,7 @@ def find_change(Y: np.ndarray, level: float = 0.99, min_segment: int = 4,
     W = np.column_stack([_winsorise(Y[:, j]) for j in range(p)])
     s = change_statistic(W, min_segment)
     k = int(np.nanargmax(s))
-    thr = change_threshold(n, p, level, min_segment)
+    thr = _tabled_threshold(table, n, p, level, min_segment)
     shift = float(np.max(np.abs(W[:k].mean(axis=0) - W[k:].mean(axis=0))))
     found = s[k] > thr and shift >= min_shift
     return ChangePoint(k if found else None, float(s[k]), thr)
@@ -674,6 +756,9 @@ class _Lines:
     v: dict[str, np.ndarray]
     usable: np.ndarray
     e: np.ndarray  # (n, len(JUDGED_EVIDENCE)) the rows' evidence, NaN where a row has none
+    #: lines with an estimate of every judged target, in domain or not (what the change
+    #: point is sought in: a domain of another material may lie outside the trained one)
+    estimated: np.ndarray
     #: the line's local anomaly in both directions (:func:`paired_scores`); NaN where the
     #: line is seen in one direction (or either row has no local evidence)
     paired: np.ndarray | None = None
@@ -682,7 +767,7 @@ class _Lines:
         paired = None if self.paired is None else self.paired[sel]
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
                       {k: a[sel] for k, a in self.v.items()}, self.usable[sel],
-                      self.e[sel], paired)  # fmt: skip
+                      self.e[sel], self.estimated[sel], paired)  # fmt: skip
 
 
 def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
@@ -693,12 +778,15 @@ def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
         cols = [np.array([_num(r.get(c)) for r in sub])
                 for c in (key, f"{key}_lo95", f"{key}_hi95", f"{key}_std")]
         y[key], v[key] = line_scale(*cols, log=log)
-    usable = np.array([_usable(r) for r in sub], bool)
+    estimated = np.array([r.get("quality") in ("ok", None, "") for r in sub], bool)
     for key in JUDGED:
-        usable &= np.isfinite(y[key]) & np.isfinite(v[key])
+        estimated &= np.isfinite(y[key])
+    usable = estimated & np.array([_usable(r) for r in sub], bool)
+    for key in JUDGED:
+        usable &= np.isfinite(v[key])
     e = np.array([[_num(r.get(c)) for c in JUDGED_EVIDENCE_COLUMNS] for r in sub], float)
     return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable,
-                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)))  # fmt: skip
+                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)), estimated)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -718,21 +806,30 @@ class TargetPool:
         return math.sqrt(self.se_stat ** 2 + self.sys ** 2)
 
 
-def pool_target(y: np.ndarray, v: np.ndarray, sys_rel: float, log: bool) -> TargetPool:
-    """Pool one target's lines: random effects plus the systematic floor ``sys_rel``
-    (log units for a log target; relative to ``|mu|`` for a linear one)."""
+def _floor(mu: float, sys_rel: float, log: bool, sys_abs: float) -> float:
+    """The systematic floor of a pooled value ``mu``: ``sys_rel`` (log units) for a log
+    target; ``hypot(sys_abs, sys_rel |mu|)`` for a linear one."""
+    return sys_rel if log else math.hypot(sys_abs, sys_rel * abs(mu))
+
+
+def pool_target(y: np.ndarray, v: np.ndarray, sys_rel: float, log: bool,
+                sys_abs: float = 0.0) -> TargetPool:  # fmt: skip
+    """Pool one target's lines: random effects plus the systematic floor (:func:`_floor`:
+    ``sys_rel`` in log units for a log target; for a linear one ``sys_rel`` relative to
+    ``|mu|`` and ``sys_abs`` in the target's unit, added in quadrature)."""
     ok = np.isfinite(y) & np.isfinite(v)
     fit = random_effects(y[ok], v[ok])
-    sys = sys_rel if log else sys_rel * abs(fit.mu)
+    sys = _floor(fit.mu, sys_rel, log, sys_abs)
     return TargetPool(fit.mu, fit.se, sys, fit.tau2, fit.tau2_lo, fit.tau2_hi, fit.k)
 
 
-def _combine(a: TargetPool, b: TargetPool, sys: float, log: bool) -> TargetPool:
+def _combine(a: TargetPool, b: TargetPool, sys: float, log: bool,
+             sys_abs: float = 0.0) -> TargetPool:  # fmt: skip
     """Trace and retrace pooled together: their mean, the statistical parts averaged,
     the floor of both directions."""
     mu = 0.5 * (a.mu + b.mu)
     se_stat = 0.5 * math.sqrt(a.se_stat ** 2 + b.se_stat ** 2)
-    s = sys if log else sys * abs(mu)
+    s = _floor(mu, sys, log, sys_abs)
     return TargetPool(mu, se_stat, s, 0.5 * (a.tau2 + b.tau2), 0.5 * (a.tau2_lo + b.tau2_lo),
                       0.5 * (a.tau2_hi + b.tau2_hi), a.n + b.n)  # fmt: skip
 
@@ -782,8 +879,11 @@ def _judge(lines: _Lines, cal: PoolingCalibration) -> np.ndarray:
 
 def _change(parts: Sequence[_Lines], cal: PoolingCalibration) -> int | None:
     """The change line of one or two directions' lines (columns side by side, lines that
-    are usable in every direction), or None."""
-    common = set.intersection(*(set(p.line[p.usable].tolist()) for p in parts))
+    have an estimate in every direction, in domain or not: where the lines after a tip
+    change or inside a domain of another material leave the trained domain, their
+    estimates still show the change, and only a few in-domain lines would be left to
+    show it), or None."""
+    common = set.intersection(*(set(p.line[p.estimated].tolist()) for p in parts))
     order = np.array(sorted(common), int)
     if order.size < 2 * cal.min_segment:
         return None
@@ -796,7 +896,8 @@ def _change(parts: Sequence[_Lines], cal: PoolingCalibration) -> int | None:
             if not POOL_TARGETS[k]:  # <F>: relative to its median, as the log targets
                 col = col / max(abs(float(np.median(col))), 1e-12)
             cols.append(col)
-    cp = find_change(np.column_stack(cols), cal.change_level, cal.min_segment, cal.min_shift)
+    cp = find_change(np.column_stack(cols), cal.change_level, cal.min_segment, cal.min_shift,
+                     cal.change_table)  # fmt: skip
     return None if cp.index is None else int(order[cp.index])
 
 
@@ -843,13 +944,15 @@ def _group_row(name: str, key: tuple, direction: str, segment: str, lines: Seque
 def _pool_part(lines: _Lines, flags: np.ndarray, direction: str,
                cal: PoolingCalibration) -> dict[str, TargetPool]:  # fmt: skip
     keep = lines.usable & ~flags
-    return {k: pool_target(lines.y[k][keep], lines.v[k][keep], cal.sys(k, direction), log)
+    return {k: pool_target(lines.y[k][keep], lines.v[k][keep], cal.sys(k, direction), log,
+                           cal.sys_nN(direction))
             for k, log in POOL_TARGETS.items()}  # fmt: skip
 
 
 def _pool_both(parts: Mapping[str, dict[str, TargetPool]],
                cal: PoolingCalibration) -> dict[str, TargetPool]:  # fmt: skip
-    return {k: _combine(parts["trace"][k], parts["retrace"][k], cal.sys(k, BOTH), log)
+    return {k: _combine(parts["trace"][k], parts["retrace"][k], cal.sys(k, BOTH), log,
+                        cal.sys_nN(BOTH))
             for k, log in POOL_TARGETS.items()}  # fmt: skip
 
 
