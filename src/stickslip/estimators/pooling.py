@@ -558,6 +558,23 @@ def _winsorise(y: np.ndarray, k: float = 4.0) -> np.ndarray:
     return np.clip(y, med - k * s, med + k * s)
 
 
+def _split_statistics(Y: np.ndarray, min_segment: int) -> np.ndarray:
+    """``S(k)`` (:func:`change_statistic`) at every allowed split ``k = min_segment ..
+    n - min_segment`` of each of a batch of series ``Y`` (r, n, p), at once: (r, splits)."""
+    n = Y.shape[1]
+    c1 = np.cumsum(Y, axis=1)
+    c2 = np.cumsum(Y * Y, axis=1)
+    tot1, tot2 = c1[:, -1:], c2[:, -1:]
+    rss0 = np.maximum(tot2 - tot1 * tot1 / n, 1e-300)
+    k = np.arange(min_segment, n - min_segment + 1)
+    a1, a2 = c1[:, k - 1], c2[:, k - 1]
+    kk = k[None, :, None].astype(float)
+    rss1 = np.maximum((a2 - a1 * a1 / kk) + ((tot2 - a2) - (tot1 - a1) ** 2 / (n - kk)), 1e-300)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = n * np.log(rss0 / rss1)
+    return np.where(np.isfinite(s), s, 0.0).sum(axis=2)
+
+
 def change_statistic(Y: np.ndarray, min_segment: int) -> np.ndarray:
     """The two-segment likelihood ratio at every split (NaN where not allowed).
 
@@ -572,36 +589,8 @@ def change_statistic(Y: np.ndarray, min_segment: int) -> np.ndarray:
     out = np.full(n, np.nan)
     if n < 2 * min_segment:
         return out
-    c1 = np.cumsum(Y, axis=0)
-    c2 = np.cumsum(Y * Y, axis=0)
-    tot1, tot2 = c1[-1], c2[-1]
-    rss0 = tot2 - tot1 * tot1 / n
-    k = np.arange(min_segment, n - min_segment + 1)
-    a1, a2 = c1[k - 1], c2[k - 1]
-    left = a2 - a1 * a1 / k[:, None]
-    b1, b2 = tot1 - a1, tot2 - a2
-    right = b2 - b1 * b1 / (n - k)[:, None]
-    rss1 = np.maximum(left + right, 1e-300)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = n * np.log(np.maximum(rss0, 1e-300) / rss1)
-    out[k] = np.sum(np.where(np.isfinite(s), s, 0.0), axis=1)
+    out[min_segment:n - min_segment + 1] = _split_statistics(Y[None], min_segment)[0]
     return out
-
-
-def _max_statistics(Y: np.ndarray, min_segment: int) -> np.ndarray:
-    """``max_k S(k)`` (:func:`change_statistic`) of each of a batch of series ``Y``
-    (r, n, p), at once."""
-    r, n, _ = Y.shape
-    c1 = np.cumsum(Y, axis=1)
-    c2 = np.cumsum(Y * Y, axis=1)
-    tot1, tot2 = c1[:, -1:], c2[:, -1:]
-    rss0 = np.maximum(tot2 - tot1 * tot1 / n, 1e-300)
-    k = np.arange(min_segment, n - min_segment + 1)
-    a1, a2 = c1[:, k - 1], c2[:, k - 1]
-    kk = k[None, :, None].astype(float)
-    rss1 = (a2 - a1 * a1 / kk) + ((tot2 - a2) - (tot1 - a1) ** 2 / (n - kk))
-    s = n * np.log(rss0 / np.maximum(rss1, 1e-300))
-    return np.where(np.isfinite(s), s, 0.0).sum(axis=2).max(axis=1)
 
 
 @lru_cache(maxsize=256)
@@ -612,9 +601,10 @@ def change_threshold(n: int, p: int, level: float, min_segment: int, reps: int =
     would draw them (the same numbers)."""
     rng = np.random.default_rng([4299, n, p, min_segment])
     chunk = max(1, min(reps, 2_000_000 // max(n * p, 1)))
-    best = np.concatenate([_max_statistics(rng.standard_normal((min(chunk, reps - a), n, p)),
-                                           min_segment)
-                           for a in range(0, reps, chunk)])  # fmt: skip
+    best = np.concatenate([
+        _split_statistics(rng.standard_normal((min(chunk, reps - a), n, p)),
+                          min_segment).max(axis=1)
+        for a in range(0, reps, chunk)])  # fmt: skip
     return float(np.quantile(best, level))
 
 
