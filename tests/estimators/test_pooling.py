@@ -101,6 +101,32 @@ def _friction_coverage(friction_nN: float, sys_rel: float, sys_abs: float, n_map
     return hits / n_maps
 
 
+def _tau(truth: np.ndarray, noise: float, interval_sd: float, seed: int) -> float:
+    """tau of one map's lines (truth per line + noise) given intervals of ``interval_sd``."""
+    y = truth + np.random.default_rng(seed).normal(0, noise, truth.size)
+    return math.sqrt(pl.pool_target(y, np.full(y.size, interval_sd**2), 0.0, True).tau2)
+
+
+def test_tau_of_a_smooth_variation_is_not_hidden_by_conservative_intervals():
+    # ln U0 varies by +-20 % along the slow axis (rms 0.141); the lines' intervals say
+    # twice the noise they carry, which alone left tau at about zero
+    n = 128
+    smooth = 0.2 * np.sin(2 * np.pi * np.arange(n) / n + 0.3)
+    taus = [_tau(smooth, 0.1, 0.2, seed) for seed in range(20)]
+    assert 0.11 <= float(np.median(taus)) <= 0.17
+    assert pl.neighbour_scale(smooth + 0.1 * np.random.default_rng(1).standard_normal(n),
+                              np.full(n, 0.04)) < 0.5  # fmt: skip
+    # a homogeneous map under the same intervals: no spread made up
+    assert np.median([_tau(np.zeros(n), 0.1, 0.2, seed) for seed in range(20)]) < 0.03
+    # a spread from line to line with no order: never less than the intervals alone give
+    iid = np.random.default_rng(7).normal(0, 0.15, n)
+    y = iid + np.random.default_rng(8).normal(0, 0.1, n)
+    v = np.full(n, 0.2**2)
+    assert pl.pool_target(y, v, 0.0, True).tau2 >= pl.random_effects(y, v).tau2 - 1e-12
+    # too few lines to tell: the intervals as they are
+    assert pl.neighbour_scale(y[:20], v[:20]) == 1.0
+
+
 def test_friction_floor_has_an_absolute_part():
     # an offset in nN: a floor relative to <F> covers high friction, not low
     assert _friction_coverage(0.5, 0.6, 0.0) < 0.85 < 0.99 <= _friction_coverage(5.0, 0.6, 0.0)
