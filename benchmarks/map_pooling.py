@@ -558,13 +558,15 @@ def by_eta(maps: list[dict], bands=(2.5, 5.0, 10.0, 20.0)) -> str:
     return "; ".join(cells)
 
 
+def whole_map_rows(maps: list[dict], dirs: tuple[str, ...] = ("both",)) -> list[dict]:
+    """The group rows of whole maps (no change-point segment) in the directions ``dirs``."""
+    return [g for m in maps for g in m["groups"]
+            if g["segment"] == "all" and g["direction"] in dirs]  # fmt: skip
+
+
 def coverage(maps: list[dict], dirs: tuple[str, ...], k: str) -> float:
-    hits = []
-    for m in maps:
-        truth = m["truth"][k]
-        for g in m["groups"]:
-            if g["segment"] == "all" and g["direction"] in dirs and math.isfinite(g[k]):
-                hits.append(g[f"{k}_lo95"] <= truth <= g[f"{k}_hi95"])
+    hits = [g[f"{k}_lo95"] <= m["truth"][k] <= g[f"{k}_hi95"]
+            for m in maps for g in whole_map_rows([m], dirs) if math.isfinite(g[k])]
     return float(np.mean(hits)) if hits else math.nan
 
 
@@ -649,8 +651,7 @@ def main() -> None:
         cells = []
         for k in TARGETS:
             w = [(g[f"{k}_hi95"] - g[f"{k}_lo95"]) / 2 / (g[k] if k != "F_mean_nN" else 1.0)
-                 for m in sel for g in m["groups"] if g["direction"] == "both"
-                 and g["segment"] == "all"]  # fmt: skip
+                 for g in whole_map_rows(sel)]
             single_w = np.nanmedian([m["single"][k] for m in sel])
             # a group whose lines were all left out has no interval
             gaps = int(np.sum(~np.isfinite(w)))
@@ -661,10 +662,9 @@ def main() -> None:
     print("  floor z95*sigma_sys (both): " + ", ".join(
         f"{k} {pl.Z95 * cal.sys(k, 'both'):.3f}" for k in TARGETS)
         + f" (relative; <F> also {pl.Z95 * cal.sys_nN('both'):.3f} nN in quadrature)")  # fmt: skip
-    both_rows = [g for m in homo for g in m["groups"]
-                 if g["segment"] == "all" and g["direction"] == "both"]  # fmt: skip
     print("between-line spread tau ('both' rows, median over maps; none simulated): " + ", ".join(
-        f"{k} {np.nanmedian([g[f'{k}_tau'] for g in both_rows]):.3f}" for k in TARGETS)
+        f"{k} {np.nanmedian([g[f'{k}_tau'] for g in whole_map_rows(homo)]):.3f}"
+        for k in TARGETS)
         + " (log units; <F> in nN)")  # fmt: skip
     fa = [any(g["change_line"] is not None for g in m["groups"] if g["segment"] == "all")
           for m in homo]  # fmt: skip
@@ -675,16 +675,14 @@ def main() -> None:
         maps = run_maps(kind, args.change_maps, P, seed, est, cal)
         hit = []
         for m in maps:
-            found = [g["change_line"] for g in m["groups"]
-                     if g["segment"] == "all" and g["direction"] == "both"]  # fmt: skip
+            found = [g["change_line"] for g in whole_map_rows([m])]
             hit.append(bool(found) and found[0] is not None and abs(found[0] - m["change"]) <= 3)
         what = "U0 x1.4 or x0.7" if kind == "tip" else "K x1.4 or x0.65"
         print(f"{kind} maps ({what}; {len(maps)}): change found within 3 lines in "
               f"{np.mean(hit):.3f} (target >= 0.80)")  # fmt: skip
     # -- smooth maps
     smooth = run_maps("smooth", 30, P, seed, est, cal)
-    rows = [g for m in smooth for g in m["groups"]
-            if g["segment"] == "all" and g["direction"] == "both"]  # fmt: skip
+    rows = whole_map_rows(smooth)
     taus = [g["U0_eV_tau"] for g in rows]
     rms = 0.2 / math.sqrt(2.0)  # of the sinusoid's ln(1 + 0.2 sin) to first order: 0.141
     inside = np.mean([g["U0_eV_tau_lo95"] <= rms <= g["U0_eV_tau_hi95"] for g in rows])

@@ -411,6 +411,13 @@ def line_scale(value: np.ndarray, lo95: np.ndarray, hi95: np.ndarray, std: np.nd
     return y, sd * sd
 
 
+def _birge_ratio(r2: np.ndarray) -> float:
+    """The robust Birge ratio of squared standardised deviations ``r2``:
+    ``median(r2) / median(chi^2_1)``, capped at 1 (lines never scatter more than their
+    variances say, here) and floored at 1e-4."""
+    return float(min(1.0, max(np.median(r2) / CHI2_1_MEDIAN, 1e-4)))
+
+
 def _robust_start(y: np.ndarray, v: np.ndarray) -> tuple[float, float]:
     mu = float(np.median(y))
     s = 1.4826 * float(np.median(np.abs(y - mu)))
@@ -449,8 +456,7 @@ def flag_outliers(Y: np.ndarray, V: np.ndarray, z: float, max_iter: int = 10) ->
     def birge(j: int, keep: np.ndarray, mu: float, tau2: float) -> float:
         if keep.sum() < MIN_BIRGE_LINES:  # too few lines to tell their scatter
             return 1.0
-        r2 = (Y[keep, j] - mu) ** 2 / (tau2 + V[keep, j])
-        return float(min(1.0, max(np.median(r2) / CHI2_1_MEDIAN, 1e-4)))
+        return _birge_ratio((Y[keep, j] - mu) ** 2 / (tau2 + V[keep, j]))
 
     fits = []
     for j in range(p):
@@ -828,8 +834,7 @@ def neighbour_scale(y: np.ndarray, v: np.ndarray) -> float:
     y, v = np.asarray(y, float), np.asarray(v, float)
     if y.size < MIN_BIRGE_LINES:
         return 1.0
-    r2 = np.diff(y) ** 2 / (v[1:] + v[:-1])
-    return float(min(1.0, max(np.median(r2) / CHI2_1_MEDIAN, 1e-4)))
+    return _birge_ratio(np.diff(y) ** 2 / (v[1:] + v[:-1]))
 
 
 def pool_target(y: np.ndarray, v: np.ndarray, sys_rel: float, log: bool,
