@@ -68,15 +68,16 @@ def _pooling(doc: dict) -> list[str]:
              f"The systematic floor `sigma_sys` of the pooled interval, calibrated on "
              f"{cfg['calibration_maps']} simulated maps (seed {cfg['calibration_seed']}; "
              f"target: {cfg['target']}).", "",
-             "| direction | <F> (relative; nN, in quadrature) | ln U0 | ln K | ln eta | "
-             "command | date |",
+             "| direction | <F> (relative; nN, in quadrature) | ln U0 (log units; nN over "
+             "F_max, in quadrature) | ln K | ln eta | command | date |",
              "|---|---|---|---|---|---|---|"]
     floor_nN = doc.get("floor_nN", {})  # files before the absolute part have none
+    offset_nN = doc.get("offset_nN", {})  # nor those before the log targets' offset part
     for key, label in (("single", "one direction"), ("both", "trace and retrace")):
-        s = doc[key]
+        s, o = doc[key], offset_nN.get(key, {})
         F = f"{s['F_mean_nN']}" + (f"; {floor_nN[key]} nN" if key in floor_nN else "")
-        lines.append(f"| {label} | {F} | {s['U0_eV']} | {s['K_N_m']} | "
-                     f"{s['eta']} | {cmd} | {cfg['date']} |")
+        logs = [f"{s[k]}" + (f"; {o[k]} nN" if k in o else "") for k in ("U0_eV", "K_N_m", "eta")]
+        lines.append(f"| {label} | {F} | {' | '.join(logs)} | {cmd} | {cfg['date']} |")
     return [*lines, ""]
 
 

@@ -2,6 +2,7 @@
 and the groups table."""
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -139,11 +140,73 @@ def test_friction_floor_has_an_absolute_part():
     assert pl.pool_target(np.full(4, 2.0), np.full(4, 0.04), 0.1, True, 0.3).sys == 0.1
 
 
+def _barrier_coverage(U0_eV: float, sys_rel: float, offset_part_nN: float, n_maps=400,
+                      offset_nN=0.3, lattice_nm=0.246, seed=4238) -> float:  # fmt: skip
+    """Pooled U0 coverage of maps whose lines share an offset of the force's zero (one scan
+    direction): it moves every line's ln U0 by its share of the largest force, F_max =
+    pi U0 / a, as the line model reads it."""
+    rng = np.random.default_rng(seed)
+    fmax = pl.force_scale_nN(math.log(U0_eV), lattice_nm)
+    hits = 0
+    for _ in range(n_maps):
+        shift = rng.normal(0, offset_nN) / fmax
+        sd = rng.uniform(0.05, 0.15, 128)
+        y = math.log(U0_eV) + shift + rng.normal(0, sd)
+        p = pl.pool_target(y, sd * sd, sys_rel, True, offset_part_nN,
+                           pl.force_scale_nN(float(np.mean(y)), lattice_nm))  # fmt: skip
+        hits += abs(p.mu - math.log(U0_eV)) <= pl.Z95 * p.se
+    return hits / n_maps
+
+
+def test_barrier_floor_has_an_offset_part_over_the_largest_force():
+    assert pl.force_scale_nN(math.log(1.0), 0.246) == pytest.approx(
+        math.pi * 0.1602176634 / 0.246)  # fmt: skip
+    # one floor in log units sized for a middling barrier: low barriers under-covered,
+    # high ones over-covered (the offset is a larger share of a small F_max)
+    mid = 0.3 / pl.force_scale_nN(math.log(1.5), 0.246)
+    assert _barrier_coverage(0.8, mid, 0.0) < 0.85 < 0.99 <= _barrier_coverage(4.0, mid, 0.0)
+    # the offset part covers both alike (F_max read off the pooled barrier, which the
+    # offset moves too: a little under 0.95 where it is a third of F_max)
+    for U0 in (0.8, 4.0):
+        assert 0.92 <= _barrier_coverage(U0, 0.0, 0.3) <= 0.98
+    # the two parts add in quadrature; without F_max the offset part is nothing
+    p = pl.pool_target(np.full(4, 0.0), np.full(4, 0.04), 0.1, True, 0.3, 2.0)
+    assert p.sys == pytest.approx(math.hypot(0.1, 0.15))
+    assert pl.pool_target(np.full(4, 0.0), np.full(4, 0.04), 0.1, True, 0.3).sys == 0.1
+
+
 def test_calibration_without_the_absolute_part_reads_as_relative_only():
     old = {k: v for k, v in pl.bundled_calibration().to_dict().items()
            if k not in ("sys_single_nN", "sys_both_nN")}  # a file written before it
     cal = pl.PoolingCalibration.from_dict(old)
     assert cal.sys_nN("trace") == cal.sys_nN(pl.BOTH) == 0.0
+    older = {k: v for k, v in old.items()
+             if k not in ("sys_single_offset_nN", "sys_both_offset_nN")}  # fmt: skip
+    cal = pl.PoolingCalibration.from_dict(older)
+    assert cal.sys_abs("U0_eV", "trace") == cal.sys_abs("K_N_m", pl.BOTH) == 0.0
+
+
+def test_group_floor_follows_the_pooled_barrier_and_the_rows_lattice(tmp_path):
+    cal = dataclasses.replace(CAL, sys_single_offset_nN={"U0_eV": 0.3, "K_N_m": 0.1},
+                              sys_both_offset_nN={"U0_eV": 0.1})  # fmt: skip
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    assert pl.PoolingCalibration.from_dict(json.loads(path.read_text())) == cal
+    zero = pl.PoolingCalibration(sys_single=dict.fromkeys(pl.POOL_TARGETS, 0.0),
+                                 sys_both=dict.fromkeys(pl.POOL_TARGETS, 0.0))  # fmt: skip
+    rows = _map_rows()
+    for r in rows:
+        r["lattice_nm"] = 0.3
+    stat = {g["direction"]: g for g in pl.pool_groups(rows, zero).groups}
+    for g in pl.pool_groups(rows, cal).groups:
+        d = g["direction"]
+        fmax = pl.force_scale_nN(math.log(g["U0_eV"]), 0.3)
+        for key in ("U0_eV", "K_N_m", "eta"):
+            floor = math.hypot(cal.sys(key, d), cal.sys_abs(key, d) / fmax)
+            se_stat = math.log(stat[d][f"{key}_hi95"] / stat[d][key]) / pl.Z95
+            assert g[key] == pytest.approx(stat[d][key], rel=1e-12)
+            assert math.log(g[f"{key}_hi95"] / g[key]) == pytest.approx(
+                pl.Z95 * math.hypot(se_stat, floor), rel=1e-9)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- lines

@@ -37,13 +37,16 @@ so the interval of a 512-line map shrinks like ``1/sqrt(N)`` only down to the fl
 ``sigma_sys``. ``sigma_sys`` (per target, for one direction and for both) was calibrated
 on simulated maps that carry such shared effects (``benchmarks/map_pooling.py``) and is
 stored with the configuration that made it in ``stickslip/resources/map_pooling.json``
-(:class:`PoolingCalibration`). For <F> the floor has two parts,
+(:class:`PoolingCalibration`). Every floor has two parts. For <F>,
 ``sigma_sys^2 = s_nN^2 + (s_rel |<F>|)^2``: an absolute one in nN (in one scan direction
 mostly the crosstalk offset, the same few tenths of a nN whatever the friction) and a
-relative one (the lateral calibration, the stated conditions). A floor relative to
-<F> alone made the intervals of low-friction maps too narrow and those of
-high-friction maps too wide, so that the coverage of a set of maps depended on its
-friction levels.
+relative one (the lateral calibration, the stated conditions). For ln U0, ln K and
+ln eta, ``sigma_sys^2 = s_rel^2 + (s_nN / F_max)^2``: one in log units and the same kind
+of offset over the pooled barrier's largest force ``F_max = pi U0 / a``
+(:func:`force_scale_nN`), since the line model reads an offset of the force's zero as
+a change of the largest force. One number per target made the intervals of
+low-friction (low-barrier) maps too narrow and those of high ones too wide, so that the
+coverage of a set of maps depended on its parameter points.
 
 The trace and retrace of a map are pooled each on its own, and ``both`` is their mean
 (geometric mean for the log targets): an offset that does not reverse with the scan
@@ -119,7 +122,9 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
+from stickslip.conditions import GRAPHITE_LATTICE_NM
 from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS, LOCAL, LOCAL_COLUMN
+from stickslip.units import EV_TO_NN_NM
 
 #: Pooled targets and whether each is pooled on a log scale.
 POOL_TARGETS: dict[str, bool] = {"F_mean_nN": False, "U0_eV": True, "K_N_m": True, "eta": True}
@@ -188,6 +193,11 @@ class PoolingCalibration:
     sys_single_nN, sys_both_nN : float
         The absolute part of <F>'s floor, nN (one direction; both): ``sigma_sys`` of <F>
         is ``hypot(sys_nN, sys_rel |<F>|)`` (0: relative only).
+    sys_single_offset_nN, sys_both_offset_nN : dict of str to float
+        Per log target, the part of its floor that an offset of the force's zero puts
+        on it, nN (one direction; both): ``sigma_sys`` of ``ln U0`` (K, eta) is
+        ``hypot(sys, offset_nN / F_max)``, ``F_max = pi U0 / a`` the pooled barrier's
+        largest force (:func:`force_scale_nN`); missing targets: 0.
     flag_z : float
         Half-width of the predictive interval, in standard deviations, outside which a
         line is flagged.
@@ -218,6 +228,8 @@ class PoolingCalibration:
     sys_both: dict[str, float] = field(default_factory=lambda: dict.fromkeys(POOL_TARGETS, 0.05))
     sys_single_nN: float = 0.0
     sys_both_nN: float = 0.0
+    sys_single_offset_nN: dict[str, float] = field(default_factory=dict)
+    sys_both_offset_nN: dict[str, float] = field(default_factory=dict)
     flag_z: float = 3.5
     change_level: float = 0.99
     min_segment: int = 4
@@ -234,6 +246,14 @@ class PoolingCalibration:
     def sys_nN(self, direction: str) -> float:
         """The absolute part of <F>'s floor (nN) for a direction."""
         return float(self.sys_both_nN if direction == BOTH else self.sys_single_nN)
+
+    def sys_abs(self, key: str, direction: str) -> float:
+        """The part of a target's floor in nN for a direction: <F>'s absolute part
+        (:meth:`sys_nN`), or a log target's offset part (over ``F_max``)."""
+        if not POOL_TARGETS[key]:
+            return self.sys_nN(direction)
+        table = self.sys_both_offset_nN if direction == BOTH else self.sys_single_offset_nN
+        return float(table.get(key, 0.0))
 
     def evidence_threshold(self) -> np.ndarray:
         """:attr:`evidence_z` in the order of :data:`JUDGED_EVIDENCE`."""
@@ -762,12 +782,14 @@ class _Lines:
     #: the line's local anomaly in both directions (:func:`paired_scores`); NaN where the
     #: line is seen in one direction (or either row has no local evidence)
     paired: np.ndarray | None = None
+    #: the lattice spacing the rows were estimated with (their median), nm
+    lattice_nm: float = GRAPHITE_LATTICE_NM
 
     def take(self, sel: np.ndarray) -> _Lines:
         paired = None if self.paired is None else self.paired[sel]
         return _Lines(self.index[sel], self.line[sel], {k: a[sel] for k, a in self.y.items()},
                       {k: a[sel] for k, a in self.v.items()}, self.usable[sel],
-                      self.e[sel], self.estimated[sel], paired)  # fmt: skip
+                      self.e[sel], self.estimated[sel], paired, self.lattice_nm)  # fmt: skip
 
 
 def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
@@ -785,8 +807,11 @@ def _lines(rows: Sequence[Mapping[str, Any]], idx: Sequence[int]) -> _Lines:
     for key in JUDGED:
         usable &= np.isfinite(v[key])
     e = np.array([[_num(r.get(c)) for c in JUDGED_EVIDENCE_COLUMNS] for r in sub], float)
+    a = np.array([_num(r.get("lattice_nm")) for r in sub])
+    a = a[np.isfinite(a) & (a > 0)]
     return _Lines(np.asarray(idx, int), np.array([_line(r) for r in sub]), y, v, usable,
-                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)), estimated)  # fmt: skip
+                  e.reshape(len(sub), len(JUDGED_EVIDENCE_COLUMNS)), estimated,
+                  lattice_nm=float(np.median(a)) if a.size else GRAPHITE_LATTICE_NM)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -806,10 +831,37 @@ class TargetPool:
         return math.sqrt(self.se_stat ** 2 + self.sys ** 2)
 
 
-def _floor(mu: float, sys_rel: float, log: bool, sys_abs: float) -> float:
-    """The systematic floor of a pooled value ``mu``: ``sys_rel`` (log units) for a log
-    target; ``hypot(sys_abs, sys_rel |mu|)`` for a linear one."""
-    return sys_rel if log else math.hypot(sys_abs, sys_rel * abs(mu))
+def force_scale_nN(ln_U0: float, lattice_nm: float) -> float:
+    """The largest force of a barrier, ``F_max = pi U0 / a`` (PHYSICS.md).
+
+    The scale of a log target's offset part of the floor: an offset ``o`` of the force's
+    zero moves the line model's ln U0 by about ``o / F_max``
+    (``benchmarks/offset_response.py``).
+
+    Parameters
+    ----------
+    ln_U0 : float
+        ln of the barrier in eV (the pooling scale of U0).
+    lattice_nm : float
+        The lattice spacing, nm.
+
+    Returns
+    -------
+    float
+        ``F_max`` in nN.
+    """
+    return math.pi * math.exp(ln_U0) * EV_TO_NN_NM / lattice_nm
+
+
+def _floor(mu: float, sys_rel: float, log: bool, sys_abs: float,
+           fmax_nN: float = math.inf) -> float:  # fmt: skip
+    """The systematic floor of a pooled value ``mu``: ``hypot(sys_rel, sys_abs / F_max)``
+    (log units) for a log target, where an offset ``sys_abs`` (nN) of the force's zero
+    moves the barrier by about its share of the largest force ``fmax_nN``;
+    ``hypot(sys_abs, sys_rel |mu|)`` for a linear one."""
+    if log:
+        return math.hypot(sys_rel, sys_abs / fmax_nN) if sys_abs > 0.0 else sys_rel
+    return math.hypot(sys_abs, sys_rel * abs(mu))
 
 
 def neighbour_scale(y: np.ndarray, v: np.ndarray) -> float:
@@ -838,25 +890,25 @@ def neighbour_scale(y: np.ndarray, v: np.ndarray) -> float:
 
 
 def pool_target(y: np.ndarray, v: np.ndarray, sys_rel: float, log: bool,
-                sys_abs: float = 0.0) -> TargetPool:  # fmt: skip
+                sys_abs: float = 0.0, fmax_nN: float = math.inf) -> TargetPool:  # fmt: skip
     """Pool one target's lines (in their order along the slow scan axis): random effects
     on the variances scaled by :func:`neighbour_scale`, plus the systematic floor
-    (:func:`_floor`: ``sys_rel`` in log units for a log target; for a linear one
-    ``sys_rel`` relative to ``|mu|`` and ``sys_abs`` in the target's unit, added in
-    quadrature)."""
+    (:func:`_floor`: for a log target ``sys_rel`` in log units and ``sys_abs`` nN over
+    the largest force ``fmax_nN``; for a linear one ``sys_rel`` relative to ``|mu|`` and
+    ``sys_abs`` in the target's unit; added in quadrature)."""
     ok = np.isfinite(y) & np.isfinite(v)
     fit = random_effects(y[ok], neighbour_scale(y[ok], v[ok]) * v[ok])
-    sys = _floor(fit.mu, sys_rel, log, sys_abs)
+    sys = _floor(fit.mu, sys_rel, log, sys_abs, fmax_nN)
     return TargetPool(fit.mu, fit.se, sys, fit.tau2, fit.tau2_lo, fit.tau2_hi, fit.k)
 
 
 def _combine(a: TargetPool, b: TargetPool, sys: float, log: bool,
-             sys_abs: float = 0.0) -> TargetPool:  # fmt: skip
+             sys_abs: float = 0.0, fmax_nN: float = math.inf) -> TargetPool:  # fmt: skip
     """Trace and retrace pooled together: their mean, the statistical parts averaged,
     the floor of both directions."""
     mu = 0.5 * (a.mu + b.mu)
     se_stat = 0.5 * math.sqrt(a.se_stat ** 2 + b.se_stat ** 2)
-    s = _floor(mu, sys, log, sys_abs)
+    s = _floor(mu, sys, log, sys_abs, fmax_nN)
     return TargetPool(mu, se_stat, s, 0.5 * (a.tau2 + b.tau2), 0.5 * (a.tau2_lo + b.tau2_lo),
                       0.5 * (a.tau2_hi + b.tau2_hi), a.n + b.n)  # fmt: skip
 
@@ -971,15 +1023,23 @@ def _group_row(name: str, key: tuple, direction: str, segment: str, lines: Seque
 def _pool_part(lines: _Lines, flags: np.ndarray, direction: str,
                cal: PoolingCalibration) -> dict[str, TargetPool]:  # fmt: skip
     keep = lines.usable & ~flags
-    return {k: pool_target(lines.y[k][keep], lines.v[k][keep], cal.sys(k, direction), log,
-                           cal.sys_nN(direction))
-            for k, log in POOL_TARGETS.items()}  # fmt: skip
+    u0 = pool_target(lines.y["U0_eV"][keep], lines.v["U0_eV"][keep], 0.0, True)
+    # the floors' offset parts scale with the pooled barrier's largest force
+    fmax = force_scale_nN(u0.mu, lines.lattice_nm) if math.isfinite(u0.mu) else math.inf
+    out = {k: pool_target(lines.y[k][keep], lines.v[k][keep], cal.sys(k, direction), log,
+                          cal.sys_abs(k, direction), fmax)
+           for k, log in POOL_TARGETS.items() if k != "U0_eV"}  # fmt: skip
+    out["U0_eV"] = dataclasses.replace(u0, sys=_floor(u0.mu, cal.sys("U0_eV", direction), True,
+                                                      cal.sys_abs("U0_eV", direction), fmax))
+    return out
 
 
-def _pool_both(parts: Mapping[str, dict[str, TargetPool]],
+def _pool_both(parts: Mapping[str, dict[str, TargetPool]], lattice_nm: float,
                cal: PoolingCalibration) -> dict[str, TargetPool]:  # fmt: skip
+    mu = 0.5 * (parts["trace"]["U0_eV"].mu + parts["retrace"]["U0_eV"].mu)
+    fmax = force_scale_nN(mu, lattice_nm) if math.isfinite(mu) else math.inf
     return {k: _combine(parts["trace"][k], parts["retrace"][k], cal.sys(k, BOTH), log,
-                        cal.sys_nN(BOTH))
+                        cal.sys_abs(k, BOTH), fmax)
             for k, log in POOL_TARGETS.items()}  # fmt: skip
 
 
@@ -1031,7 +1091,8 @@ def pool_groups(rows: Sequence[Mapping[str, Any]],
                 flags = [w != "" for w in whys]
                 pools_by = {d: _pool_part(p, f, d, cal)
                             for d, p, f in zip(dirs, sub, flags, strict=True)}  # fmt: skip
-                pools = pools_by[dirs[0]] if len(dirs) == 1 else _pool_both(pools_by, cal)
+                pools = (pools_by[dirs[0]] if len(dirs) == 1
+                         else _pool_both(pools_by, sub[0].lattice_nm, cal))  # fmt: skip
                 name = f"{stem}:{direction}" + ("" if segment == "all" else f":{segment}")
                 row = _group_row(name, key, direction, segment, sub, pools, flags, change, unit)
                 if segment == "all" and change is not None:
