@@ -105,7 +105,8 @@ Lines that break the pattern
 
 Everything here is a pure function of the rows (mappings with the result table's column
 names); the module imports nothing from the rest of the package but the evidence's
-names (:mod:`stickslip.estimators.evidence`, numpy only).
+names (:mod:`stickslip.estimators.evidence`, numpy only), the unit of energy and the
+default lattice (:mod:`stickslip.units`, :mod:`stickslip.conditions`, leaf modules).
 """
 
 from __future__ import annotations
