@@ -1,7 +1,7 @@
 """What sets the width of a single line's U0 interval: the calibration lines' errors.
 
-The bundled line model's intervals are calibrated on lines drawn as
-:func:`stickslip.estimators.line.families.calibrate_on_families` draws them (the
+The bundled line model's intervals are calibrated on the lines of
+:func:`stickslip.estimators.line.families.family_calibration_lines` (the
 calibration pool of ``benchmarks/families.py``: 600 clean trajectories of the training
 prior, seed 501, with the multi-asperity contact lines that one PT describes; four
 draws of the nuisance prior, ``"train"`` implementations, each line's offset restated
@@ -29,7 +29,6 @@ here where missing). Nothing here is fitted into the model; it is a diagnostic.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import numpy as np
@@ -39,11 +38,8 @@ from _machine import machine_line
 from stickslip.estimators.line.ensemble import predict_std_lines
 from stickslip.estimators.line.families import (
     FamilyCalibration,
-    calibration_lines,
     contact_lines,
-    draw_family_lines,
-    draw_training_lines,
-    restate_offsets,
+    family_calibration_lines,
 )
 from stickslip.estimators.line.modelfile import load_line_model
 from stickslip.estimators.line.training import power_fit
@@ -51,8 +47,7 @@ from stickslip.estimators.offsets import friction_bounds
 from stickslip.jobs.train import BundledRecipe
 from stickslip.simulators import effects as fx
 from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set
-from stickslip.traces.dataset import concat_datasets
-from stickslip.units import EV_TO_NN_NM
+from stickslip.units import fmax_nN
 
 ROOT = Path(__file__).resolve().parents[1]
 Z95 = 1.959964
@@ -79,20 +74,11 @@ def main() -> None:
     settings = FamilyCalibration(contacts=CONTACTS)
     pool = cached_randomised_set(BundledRecipe().prior(RandomisedConfig(n=CAL_N, seed=CAL_SEED)),
                                  args.work)  # fmt: skip
-    contacts = contact_lines(settings, args.work)
-    clean = concat_datasets([pool, contacts],
-                            columns=[k for k in contacts.params if k in pool.params])
-    lines = restate_offsets(draw_family_lines(clean, settings.prior, settings.seed,
-                                              settings.draws, settings.implementation),
-                            settings.offset, settings.seed)  # fmt: skip
-    mild = draw_training_lines(clean, settings.seed, settings.training_draws)
-    parts = [calibration_lines(ens, lines, offset=True, coarse_fraction=settings.coarse_fraction,
-                               seed=settings.seed),
-             calibration_lines(ens, mild, coarse_fraction=settings.coarse_fraction,
-                               seed=settings.seed + 1)]  # fmt: skip
+    parts = family_calibration_lines(ens, pool, settings, contact_lines(settings, args.work))
+    lines, mild = parts.prior, parts.training
     j = 1  # ln U0 (in the mapped frame; differences are ln U0's)
     err, sd = [], []
-    for cs, Y in parts:
+    for cs, Y in ((parts.prior_set, parts.prior_Y), (parts.training_set, parts.training_Y)):
         mu, s = predict_std_lines(ens, cs.lines, cs.C)
         err.append(mu[:, j] * float(ens.y_std[j]) + float(ens.y_mean[j]) - Y[:, j])
         sd.append(s[:, j] * float(ens.y_std[j]))
@@ -103,7 +89,7 @@ def main() -> None:
                              np.zeros(mild.data.n)])  # fmt: skip
     p = {k: np.concatenate([lines.data.params[k], mild.data.params[k]])
          for k in ("U0_eV", "lattice_nm")}  # fmt: skip
-    fmax = math.pi * p["U0_eV"] * EV_TO_NN_NM / p["lattice_nm"]
+    fmax = fmax_nN(p["U0_eV"], p["lattice_nm"])
     fmax_hat = fmax * np.exp(e)
     applied = np.vstack([lines.applied, np.zeros((mild.data.n, lines.applied.shape[1]), bool)])
     a = np.abs(e)

@@ -256,6 +256,58 @@ def contact_lines(settings: FamilyCalibration,
     return concat_datasets(parts) if len(parts) > 1 else parts[0]
 
 
+@dataclass
+class FamilyCalibrationLines:
+    """The lines a family calibration is fitted on (:func:`family_calibration_lines`).
+
+    Attributes
+    ----------
+    clean : the clean trajectories, the contact lines joined where the settings ask.
+    prior, prior_set, prior_Y : the nuisance prior's lines as drawn (offsets restated),
+        as the calibration reads them, and their targets.
+    training, training_set, training_Y : the same for the members' training effects
+        (None without ``training_draws``).
+    n_contact_lines : contact lines among ``clean``.
+    """
+
+    clean: Dataset
+    prior: FamilyLines
+    prior_set: ValidationSet
+    prior_Y: np.ndarray
+    training: FamilyLines | None
+    training_set: ValidationSet | None
+    training_Y: np.ndarray | None
+    n_contact_lines: int
+
+
+def family_calibration_lines(ens: LineEnsemble, clean: Dataset, settings: FamilyCalibration,
+                             contacts: Dataset | None = None) -> FamilyCalibrationLines:
+    """Draw and read the calibration lines of ``settings`` on the clean trajectories
+    ``clean`` (:func:`calibrate_on_families` fits on them; ``benchmarks/u0_width.py``
+    reads them). ``contacts``: the lines of :func:`contact_lines` where already made
+    (simulated here when ``settings.contacts`` asks for them and none are given); they
+    join ``clean``."""
+    n_contacts = 0
+    if settings.contacts:
+        contacts = contact_lines(settings) if contacts is None else contacts
+        n_contacts = contacts.n
+        # the truths and conditions both hold (a pool may lack the dynamics columns)
+        clean = concat_datasets([clean, contacts],
+                                columns=[k for k in contacts.params if k in clean.params])
+    lines = draw_family_lines(clean, settings.prior, settings.seed, settings.draws,
+                              settings.implementation)  # fmt: skip
+    if settings.offset is not None:
+        lines = restate_offsets(lines, settings.offset, settings.seed)
+    cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None,
+                              coarse_fraction=settings.coarse_fraction, seed=settings.seed)
+    mild = mild_set = Y_mild = None
+    if settings.training_draws:
+        mild = draw_training_lines(clean, settings.seed, settings.training_draws)
+        mild_set, Y_mild = calibration_lines(ens, mild, coarse_fraction=settings.coarse_fraction,
+                                             seed=settings.seed + 1)  # fmt: skip
+    return FamilyCalibrationLines(clean, lines, cs, Y, mild, mild_set, Y_mild, n_contacts)
+
+
 def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
                           settings: FamilyCalibration | None = None,
                           contacts: Dataset | None = None) -> dict:  # fmt: skip
@@ -266,27 +318,16 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     report (:func:`~stickslip.estimators.line.training.calibrate_and_report`) with the
     settings under ``"family_calibration"``. ``contacts``: the lines of
     :func:`contact_lines` where already made (simulated here when
-    ``settings.contacts`` asks for them and none are given); they join ``clean``.
+    ``settings.contacts`` asks for them and none are given); they join ``clean``
+    (:func:`family_calibration_lines`).
     """
     settings = settings or FamilyCalibration()
-    if settings.contacts:
-        contacts = contact_lines(settings) if contacts is None else contacts
-        # the truths and conditions both hold (a pool may lack the dynamics columns)
-        clean = concat_datasets([clean, contacts],
-                                columns=[k for k in contacts.params if k in clean.params])
-    lines = draw_family_lines(clean, settings.prior, settings.seed, settings.draws,
-                              settings.implementation)  # fmt: skip
-    if settings.offset is not None:
-        lines = restate_offsets(lines, settings.offset, settings.seed)
-    cs, Y = calibration_lines(ens, lines, offset=settings.offset is not None,
-                              coarse_fraction=settings.coarse_fraction, seed=settings.seed)
+    parts = family_calibration_lines(ens, clean, settings, contacts)
+    cs, Y = parts.prior_set, parts.prior_Y
     # the calibration lines that carry each family (training draws, if any, carry none)
-    groups = {f: lines.applied[:, j] for j, f in enumerate(fx.FAMILIES)}
-    if settings.training_draws:
-        mild, Y_mild = calibration_lines(ens, draw_training_lines(clean, settings.seed,
-                                                                  settings.training_draws),
-                                         coarse_fraction=settings.coarse_fraction,
-                                         seed=settings.seed + 1)  # fmt: skip
+    groups = {f: parts.prior.applied[:, j] for j, f in enumerate(fx.FAMILIES)}
+    if parts.training_set is not None:
+        mild, Y_mild = parts.training_set, parts.training_Y
         cs = ValidationSet(lines=cs.lines + mild.lines, C=torch.cat([cs.C, mild.C]),
                            rows=np.concatenate([cs.rows, mild.rows]),
                            strata=np.concatenate([cs.strata, np.ones(len(mild.lines), int)]),
@@ -299,7 +340,7 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     power = ens.exponent is not None and not np.allclose(ens.exponent, 1.0)
     ens.offset, ens.compression = settings.offset, settings.compression
     report = calibrate_and_report(ens, cs, Y, ens.classes, power, groups)
-    report["family_calibration"] = {**settings.to_dict(), "n_trajectories": clean.n,
-                                    "n_contact_lines": contacts.n if settings.contacts else 0,
-                                    "clean_fingerprint": clean.fingerprint()}  # fmt: skip
+    report["family_calibration"] = {**settings.to_dict(), "n_trajectories": parts.clean.n,
+                                    "n_contact_lines": parts.n_contact_lines,
+                                    "clean_fingerprint": parts.clean.fingerprint()}  # fmt: skip
     return report
