@@ -23,7 +23,6 @@ no single line can.
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 from _machine import machine_line
@@ -35,7 +34,7 @@ from stickslip.simulators import effects as fx
 from stickslip.simulators.config import ParameterRange
 from stickslip.simulators.sampling import sample_parameters
 from stickslip.traces.trace import Trace
-from stickslip.units import EV_TO_NN_NM
+from stickslip.units import fmax_nN
 
 OFFSETS_NN = (-0.4, -0.2, -0.1, 0.1, 0.2, 0.4)
 
@@ -71,7 +70,7 @@ def main() -> None:
         return np.array([r.get(key, np.nan) for r in rs], float)
 
     base = rows(0.0)
-    fmax = math.pi * U0 * EV_TO_NN_NM / a
+    fmax = fmax_nN(U0, a)
     print(f"{args.n} clean lines (paper preset, eta 2-30, seed {args.seed}); F_max "
           f"{np.min(fmax):.2f}-{np.max(fmax):.2f} nN (median {np.median(fmax):.2f})")
     print(f"{'offset nN':>9} | {'d ln U0':>8} {'/(o/F_max)':>10} | {'d ln K':>8} "
@@ -86,7 +85,7 @@ def main() -> None:
               f"{np.mean([bool(v.get('in_domain')) for v in r]):.2f}")  # fmt: skip
     prior = OffsetPrior.from_family(fx.Crosstalk())
     q = offset_quantile(prior)
-    fmax_hat = math.pi * col(base, "U0_eV") * EV_TO_NN_NM / a
+    fmax_hat = fmax_nN(col(base, "U0_eV"), a)
     half = 0.5 * np.log(col(base, "U0_eV_hi95") / col(base, "U0_eV_lo95"))
     need = np.log1p(q / fmax_hat)
     err = np.abs(np.log(col(base, "U0_eV") / U0))

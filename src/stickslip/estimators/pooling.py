@@ -125,7 +125,7 @@ from scipy import optimize, stats
 
 from stickslip.conditions import GRAPHITE_LATTICE_NM
 from stickslip.estimators.evidence import EVIDENCE, EVIDENCE_COLUMNS, LOCAL, LOCAL_COLUMN
-from stickslip.units import EV_TO_NN_NM
+from stickslip.units import fmax_nN
 
 #: Pooled targets and whether each is pooled on a log scale.
 POOL_TARGETS: dict[str, bool] = {"F_mean_nN": False, "U0_eV": True, "K_N_m": True, "eta": True}
@@ -833,7 +833,9 @@ class TargetPool:
 
 
 def force_scale_nN(ln_U0: float, lattice_nm: float) -> float:
-    """The largest force of a barrier, ``F_max = pi U0 / a`` (PHYSICS.md).
+    """The largest force of a pooled barrier, ``F_max = pi U0 / a``
+    (:func:`stickslip.units.fmax_nN`); infinite where the pooled ln U0 is not finite, so
+    that the offset part of a floor vanishes where there is no barrier to scale it.
 
     The scale of a log target's offset part of the floor: an offset ``o`` of the force's
     zero moves the line model's ln U0 by about ``o / F_max``
@@ -851,7 +853,7 @@ def force_scale_nN(ln_U0: float, lattice_nm: float) -> float:
     float
         ``F_max`` in nN.
     """
-    return math.pi * math.exp(ln_U0) * EV_TO_NN_NM / lattice_nm
+    return float(fmax_nN(math.exp(ln_U0), lattice_nm)) if math.isfinite(ln_U0) else math.inf
 
 
 def _floor(mu: float, sys_rel: float, log: bool, sys_abs: float,
@@ -1026,7 +1028,7 @@ def _pool_part(lines: _Lines, flags: np.ndarray, direction: str,
     keep = lines.usable & ~flags
     u0 = pool_target(lines.y["U0_eV"][keep], lines.v["U0_eV"][keep], 0.0, True)
     # the floors' offset parts scale with the pooled barrier's largest force
-    fmax = force_scale_nN(u0.mu, lines.lattice_nm) if math.isfinite(u0.mu) else math.inf
+    fmax = force_scale_nN(u0.mu, lines.lattice_nm)
     out = {k: pool_target(lines.y[k][keep], lines.v[k][keep], cal.sys(k, direction), log,
                           cal.sys_abs(k, direction), fmax)
            for k, log in POOL_TARGETS.items() if k != "U0_eV"}  # fmt: skip
@@ -1037,8 +1039,8 @@ def _pool_part(lines: _Lines, flags: np.ndarray, direction: str,
 
 def _pool_both(parts: Mapping[str, dict[str, TargetPool]], lattice_nm: float,
                cal: PoolingCalibration) -> dict[str, TargetPool]:  # fmt: skip
-    mu = 0.5 * (parts["trace"]["U0_eV"].mu + parts["retrace"]["U0_eV"].mu)
-    fmax = force_scale_nN(mu, lattice_nm) if math.isfinite(mu) else math.inf
+    fmax = force_scale_nN(0.5 * (parts["trace"]["U0_eV"].mu + parts["retrace"]["U0_eV"].mu),
+                          lattice_nm)  # fmt: skip
     return {k: _combine(parts["trace"][k], parts["retrace"][k], cal.sys(k, BOTH), log,
                         cal.sys_abs(k, BOTH), fmax)
             for k, log in POOL_TARGETS.items()}  # fmt: skip
