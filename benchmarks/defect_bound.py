@@ -24,7 +24,15 @@ shared per-map effects and per-line detector effects, imported from it):
   with an unknown amplitude, ``exp(r^2 / 2)``, averaged over the positions (a uniform
   prior on where the defect is): what a detector can do that knows the shape of the
   filter but not the position, without the shipped filter's per-line scale;
-- both scored as the pooling scores (robust z against the map's clean lines, trace and
+- a *shape-told likelihood*: the same position-averaged likelihood ratio, one-sided
+  (a barrier pushes one way), with the filter replaced by the point's own response to one
+  defect (learned from ``--lines`` further lines of the point, trace and retrace, each
+  crossing one defect at the window's middle, 7 nm, without map effects: the defect
+  lines' mean level less the clean lines', cut to 6 lattice periods either side of its
+  middle, made blind to an offset, a slope and a curvature): the best a detector
+  blind to the position can do when it knows everything else about the defect. Where it
+  stays short of the told detector, what is missing is the position;
+- all scored as the pooling scores (robust z against the map's clean lines, trace and
   retrace summed over sqrt 2), flagged above the threshold that flags ``--fpr`` of the
   clean lines of all points together.
 
@@ -53,6 +61,8 @@ from stickslip.estimators.periodic import sliding_period_mean
 from stickslip.simulators import PhysicalSettings, simulate
 
 MAPS = 4  # maps per point: the first two learn the told detector's template
+#: Half-length of the shape-told detector's response, in lattice periods.
+SHAPE_HALF = 6.0
 
 
 def _robust_z(x: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -78,10 +88,50 @@ def blind_likelihood(F: np.ndarray, period_px: float, reference: np.ndarray) -> 
     return np.log(np.mean(np.exp(0.5 * np.minimum(q, 30.0) ** 2), axis=1))
 
 
+def one_defect_shapes(U0: float, K: float, n: int, seed: int, barrier: float) -> list[np.ndarray]:
+    """The point's response to one defect at 7 nm (trace, retrace as the readers store
+    them): the mean level of ``n`` lines crossing it less that of ``n`` clean lines, cut
+    to :data:`SHAPE_HALF` periods either side of its middle (where the shipped filter
+    answers most), blind to an offset, a slope and a curvature, of unit norm, signed so
+    that its pairing with the mean response is positive."""
+    s = PhysicalSettings()
+    period = s.lattice_nm / s.pixel_nm
+    U, Kv = np.full(n, U0), np.full(n, K)
+    # the second defect far outside the window: one defect per line
+    xs = np.tile([7.0, -1e3], (n, 1))
+    bad = mp._defect_lines(U, Kv, xs, seed, barrier)
+    clean = (simulate(U, Kv, s, seed=seed + 11).force_nN,
+             simulate(U, Kv, s, seed=seed + 12).force_nN)  # fmt: skip
+    out = []
+    for d, key in enumerate(("defect", "defect_retrace")):
+        r = _level(bad[key], period).mean(axis=0) - _level(clean[d], period).mean(axis=0)
+        h = int(round(SHAPE_HALF * period))
+        # centred where the shipped filter answers most: the dipole's middle
+        k = local_kernel(LOCAL_SCALE * period)
+        a = np.abs(np.correlate(r, k, mode="same"))
+        c = int(np.clip(np.argmax(a), h, r.size - h - 1))
+        w = r[c - h : c + h + 1]
+        t = np.linspace(-1.0, 1.0, w.size)
+        Q, _ = np.linalg.qr(np.column_stack([np.ones_like(t), t, t * t]))
+        w = w - Q @ (Q.T @ w)
+        out.append(w / np.linalg.norm(w))
+    return out
+
+
+def shape_likelihood(F: np.ndarray, period_px: float, shape: np.ndarray,
+                     reference: np.ndarray) -> np.ndarray:  # fmt: skip
+    """ln of the position-averaged one-sided likelihood ratio of one defect of the
+    response ``shape``, the response in units of the map's noise scale of it (from the
+    ``reference`` lines)."""
+    r = fftconvolve(_level(F, period_px), shape[None, ::-1], mode="valid", axes=1)
+    q = r / np.median(1.4826 * np.median(np.abs(r[reference]), axis=1))
+    return np.log(np.mean(np.exp(0.5 * np.clip(q, 0.0, 30.0) ** 2), axis=1))
+
+
 def point_scores(U0: float, K: float, xs: np.ndarray, n: int, seed: int, barrier: float,
                  rng: np.random.Generator) -> dict[str, np.ndarray]:  # fmt: skip
     """Each detector's paired scores of the test maps' lines of one parameter point
-    (``told``, ``shipped``, ``blind``), and which of them cross the defects
+    (``told``, ``shape``, ``blind``, ``shipped``), and which of them cross the defects
     (``defect``)."""
     s = PhysicalSettings()
     period = s.lattice_nm / s.pixel_nm
@@ -102,7 +152,9 @@ def point_scores(U0: float, K: float, xs: np.ndarray, n: int, seed: int, barrier
         L = np.concatenate([_level(maps[m][d], period) for m in range(2)])
         lab = np.tile(defect, 2)
         templates.append(L[lab].mean(axis=0) - L[~lab].mean(axis=0))
+    shapes = one_defect_shapes(U0, K, n, seed + 1_000_000, barrier)  # seeds apart
     stats = {"told": lambda F, d: _level(F, period) @ templates[d],
+             "shape": lambda F, d: shape_likelihood(F, period, shapes[d], ~defect),
              "shipped": lambda F, d: local_evidence(F, period),
              "blind": lambda F, d: blind_likelihood(F, period, ~defect)}  # fmt: skip
     out: dict[str, list] = {name: [] for name in stats}
@@ -132,7 +184,7 @@ def main() -> None:
     t0 = time.time()
     pts = mp._points(args.seed, args.points)
     rng = np.random.default_rng([args.seed, 7])
-    names = ("told", "blind", "shipped")
+    names = ("told", "shape", "blind", "shipped")
     scores = []
     for p, (U0, K) in enumerate(tqdm(pts, desc="parameter points", unit="point")):
         xs = rng.uniform(3.0, 9.0, 2) + 2.0  # as map_pooling.defect_pools draws them
