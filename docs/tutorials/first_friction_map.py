@@ -126,8 +126,9 @@ groups[["direction", "n_lines", "U0_eV", "U0_eV_lo95", "U0_eV_hi95", "K_N_m", "K
 # %% [markdown]
 # The truth was U0 = 1.5 eV and K = 10 N/m. The pooled interval is wider than the
 # lines' scatter: it carries the errors every line of one map shares (the lateral
-# calibration, the stated conditions, the tip), which no number of lines averages away. The `both` row (trace and retrace
-# together) is the one to quote: it cancels offsets that do not reverse with the scan.
+# calibration, the stated conditions, the tip), which no number of lines averages
+# away. The `both` row (trace and retrace together) is the one to quote: it cancels
+# offsets that do not reverse with the scan.
 
 # %%
 both = groups[groups["direction"] == "both"].iloc[0]
