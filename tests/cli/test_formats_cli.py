@@ -116,3 +116,17 @@ def test_friction_load_refuses_mixed_units(ramp, tmp_path):
               "--loads", "1,2"])
     assert r.exit_code == 1 and "mixed units" in r.stderr
     assert not (tmp_path / "m2.png").exists()
+
+
+@pytest.mark.parametrize("name", ["table.csv", "plot", "folder.png"])
+def test_friction_load_refuses_an_output_it_cannot_write_before_reading(ramp, tmp_path, name):
+    out = tmp_path / name
+    if name == "folder.png":
+        out.mkdir()
+    r = _run(["friction-load", ramp / "si.0_00144.spm", "--out", out])
+    assert r.exit_code == 2
+    (line,) = _error_lines(r)
+    assert "--out" in line and str(out) in line
+    assert r.exception is None or isinstance(r.exception, SystemExit)
+    assert r.stdout == "" and sorted(p.name for p in tmp_path.iterdir()) == (
+        ["folder.png"] if name == "folder.png" else [])

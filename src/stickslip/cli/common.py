@@ -71,6 +71,20 @@ def usage_error(message: str) -> NoReturn:
     raise typer.Exit(EXIT_USAGE)
 
 
+#: Image formats a plot option accepts (matplotlib writes each from the suffix).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def check_plot_path(option: str, path: Path) -> None:
+    """A usage error, before any work, unless ``path`` names an image file this tool
+    writes (:data:`PLOT_SUFFIXES`)."""
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        usage_error(f"{option} {path}: a plot is written as one of {', '.join(PLOT_SUFFIXES)} "
+                    "(the suffix says which)")  # fmt: skip
+    if path.is_dir():
+        usage_error(f"{option} {path} is a directory")
+
+
 def info(message: str) -> None:
     """Print a status line to stderr (stdout is kept for tables); quiet under ``-q``."""
     if VERBOSITY["level"] >= 1:

@@ -15,6 +15,7 @@ from stickslip.cli.common import (
     EXIT_OK,
     LOADS_HELP,
     LPL_HELP,
+    check_plot_path,
     echo,
     error,
     info,
@@ -158,6 +159,9 @@ def friction_load_cmd(
     from stickslip.diagnostics import load_fits as lf
     from stickslip.estimators.table import ResultTable, TableFormatError, table_format
 
+    check_plot_path("--out", out)
+    if csv_out is not None and csv_out.is_dir():
+        usage_error(f"--csv {csv_out} is a directory")
     load_list = parse_loads_arg(loads)
     opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
                            None, load_unit)

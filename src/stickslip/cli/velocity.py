@@ -12,14 +12,13 @@ from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
     EXIT_OK,
+    check_plot_path,
     echo,
     error,
     info,
     reading_options,
     usage_error,
 )
-
-PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 
 def _velocities(text: str | None) -> list[float] | None:
@@ -85,11 +84,9 @@ def friction_velocity_cmd(
         table_format(out)
     except TableFormatError as e:
         usage_error(str(e))
-    if plot.suffix.lower() not in PLOT_SUFFIXES:
-        usage_error(f"--plot {plot}: use one of {', '.join(PLOT_SUFFIXES)}")
-    for p in (out, plot):
-        if p.is_dir():
-            usage_error(f"{p} is a directory")
+    check_plot_path("--plot", plot)
+    if out.is_dir():
+        usage_error(f"{out} is a directory")
     opts = reading_options(calibration, None, None)
     if check:
         info("simulating the check series (slow velocities take longest) ...")
