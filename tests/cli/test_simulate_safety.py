@@ -151,3 +151,14 @@ def test_ctrl_c_stops_soon_keeps_rows_and_prints_resume_command(tmp_path):
     assert last == (f"stickslip: error: interrupted: {done} of {n} trajectories kept in "
                     f"{part}; continue with: {resume}")  # fmt: skip
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "args", [["--u0", "1e9", "--k", "5"], ["--u0", "1", "--k", "5", "--dt", "1"]])
+def test_a_step_the_integrator_cannot_take_is_one_usage_error_and_no_file(tmp_path, args):
+    # before: a barrier of 1e9 eV warmed up for hours, a step of 1 s wrote a NaN trace
+    out = tmp_path / "t.csv"
+    r = runner.invoke(app, ["simulate", "--out", str(out), *args])
+    assert r.exit_code == 2
+    assert "stability limit" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []

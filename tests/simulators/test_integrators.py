@@ -88,3 +88,30 @@ def test_bad_parameters_raise(bad):
 
     with pytest.raises(SettingsError):
         simulate([bad.get("U0", 1.0)], [bad.get("K", 10.0)], FAST)
+
+
+def test_time_step_beyond_the_stability_limit_is_refused_and_one_inside_it_is_finite():
+    # BAOAB is stable on a harmonic well only for omega dt < 2: the limit is the
+    # integrator's, at the potential's stiffest point, and refusing beyond it loses nothing
+    from stickslip.simulators import SettingsError
+    from stickslip.simulators.config import STABLE_OMEGA_DT, omega_max_per_s
+
+    U0, K = np.array([0.5, 4.0]), np.array([5.0, 30.0])
+    s = FAST.replace(temperature_K=0.0)
+    limit = STABLE_OMEGA_DT / float(np.max(omega_max_per_s(U0, K, s.lattice_nm, s.mass_kg)))
+    inside = simulate(U0, K, s.replace(dt_s=0.9 * limit), backend="numpy").force_nN
+    assert np.all(np.isfinite(inside))
+    with pytest.raises(SettingsError, match="stability limit"):
+        simulate(U0, K, s.replace(dt_s=1.1 * limit))
+    # the barrier's modulation and defects stiffen the potential: the limit sees them
+    mod = (np.array([0.0, 3.0]), np.array([2.0, 2.0]), np.array([0.0, 0.0]))
+    with pytest.raises(SettingsError, match="stability limit"):
+        simulate(U0, K, s.replace(dt_s=0.9 * limit), modulation=mod)
+
+
+def test_a_sweep_config_beyond_the_stability_limit_is_refused_before_any_run():
+    from stickslip.simulators import ParameterRange, SettingsError, SweepConfig
+
+    with pytest.raises(SettingsError, match="stability limit"):
+        SweepConfig(physics=PhysicalSettings(dt_s=1e-6), ranges=ParameterRange())
+    SweepConfig()  # the default preset's step is well inside

@@ -122,6 +122,10 @@ def simulate_cmd(
                 raise SettingsError(f"U0 must be >= 0 eV (got {u0})")
             res = simulate([u0], [k], physics, seed=seed, samples_per_pixel=max(fine, 0),
                            backend=backend)  # fmt: skip
+            if not np.all(np.isfinite(res.force_nN)):
+                error(f"{out}: not written: the simulated force is not finite (the time "
+                      "step is too long for this barrier, spring and mass)")  # fmt: skip
+                raise typer.Exit(1)
             write_trace_csv(out, res.x_nm, res.force_nN[0])
             if fine > 0:
                 _write_fine(out, res)

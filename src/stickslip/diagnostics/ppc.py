@@ -38,10 +38,10 @@ import numpy as np
 
 from stickslip.compiled import made_up_line
 from stickslip.estimators.noise import noise_nN
-from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.config import PhysicalSettings, omega_max_per_s
 from stickslip.simulators.kernel import LANES
 from stickslip.simulators.simulate import simulate
-from stickslip.units import EV_TO_NN_NM, fmax_nN
+from stickslip.units import fmax_nN
 
 STATISTICS = ("F_mean", "F_std", "F_p90", "F_p99", "slope_med", "slips_per_nm", "drop_mean")
 #: Columns of :attr:`PPCResult.z`: the statistics, then the change of <F> along the line.
@@ -145,9 +145,7 @@ def check_time_step(U0_eV: np.ndarray, K_N_m: np.ndarray, lattice_nm: np.ndarray
     :data:`MAX_DT_S`, where ``omega_max^2 = (K + 2 pi^2 U0 / a^2) / m`` is the stiffest
     curvature of the PT potential plus the spring; rounded down to a few levels
     (``MAX_DT_S / 2^(k/2)``) so that traces share simulate calls."""
-    curvature = 2.0 * np.pi**2 * np.asarray(U0_eV, float) * EV_TO_NN_NM \
-        / np.asarray(lattice_nm, float) ** 2  # nN/nm = N/m  # fmt: skip
-    omega = np.sqrt((np.asarray(K_N_m, float) + curvature) / mass_kg)
+    omega = omega_max_per_s(U0_eV, K_N_m, lattice_nm, mass_kg)
     level = np.ceil(2.0 * np.log2(np.maximum(1.0, MAX_DT_S * omega / OMEGA_DT)))
     return MAX_DT_S / 2.0 ** (level / 2.0)
 

@@ -14,11 +14,43 @@ from typing import Any
 
 import numpy as np
 
-from stickslip.units import eta_from, fmax_nN
+from stickslip.units import EV_TO_NN_NM, eta_from, fmax_nN
 
 
 class SettingsError(ValueError):
     """Invalid physical or sampling settings; ``str()`` is one line for the user."""
+
+
+#: The integrator (BAOAB, velocity Verlet at its core) is stable on a harmonic well of
+#: angular frequency omega only for ``omega dt`` below 2: beyond it every trajectory
+#: diverges, whatever the temperature.
+STABLE_OMEGA_DT = 2.0
+
+
+def omega_max_per_s(U0_eV, K_N_m, lattice_nm, mass_kg, extra_N_m=0.0) -> np.ndarray:
+    """The highest angular frequency (1/s) of the tip in the PT potential:
+    ``sqrt((K + 2 pi^2 U0 / a^2 + extra) / m)``, the spring plus the lattice's largest
+    curvature (``U = -(U0/2) cos(2 pi x/a)``) plus ``extra_N_m`` of any other potential
+    (modulation, defects)."""
+    curvature = 2.0 * np.pi**2 * np.asarray(U0_eV, float) * EV_TO_NN_NM \
+        / np.asarray(lattice_nm, float) ** 2  # nN/nm = N/m  # fmt: skip
+    stiffness = np.asarray(K_N_m, float) + curvature + np.asarray(extra_N_m, float)
+    return np.sqrt(stiffness / np.asarray(mass_kg, float))
+
+
+def check_stable_time_step(dt_s: float, U0_eV, K_N_m, lattice_nm, mass_kg,
+                           extra_N_m=0.0) -> None:  # fmt: skip
+    """Raise :class:`SettingsError` where ``dt_s`` is beyond the integrator's stability
+    limit ``omega_max dt < 2`` (:data:`STABLE_OMEGA_DT`, :func:`omega_max_per_s`) for any
+    of the trajectories: they would all diverge (a NaN trace), or, for a barrier of
+    millions of eV, warm up for ever first."""
+    omega = float(np.max(omega_max_per_s(U0_eV, K_N_m, lattice_nm, mass_kg, extra_N_m)))
+    if not omega * dt_s < STABLE_OMEGA_DT:
+        raise SettingsError(
+            f"time step {dt_s:.3g} s is beyond the integrator's stability limit "
+            f"{STABLE_OMEGA_DT / omega:.3g} s (2/omega_max at the stiffest point of the "
+            "potential, spring and mass given): use a smaller --dt, or check U0, K and the mass"
+        )
 
 
 @dataclass(frozen=True)
@@ -177,6 +209,12 @@ class SweepConfig:
     seed: int = 0
     preset: str = "paper"
     backend: str = "cpu"
+
+    def __post_init__(self) -> None:
+        # the box's stiffest corner at the settings' step: refused before any shard runs
+        p = self.physics
+        check_stable_time_step(p.dt_s, self.ranges.U0_eV[1], self.ranges.K_N_m[1],
+                               p.lattice_nm, p.mass_kg)  # fmt: skip
 
     def to_json(self) -> str:
         """The whole configuration as JSON (stored in every sweep file)."""

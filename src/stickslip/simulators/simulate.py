@@ -7,9 +7,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from stickslip.simulators.backends import get_backend
-from stickslip.simulators.config import PhysicalSettings, SettingsError, warmup_nm_for
+from stickslip.simulators.config import (
+    PhysicalSettings,
+    SettingsError,
+    check_stable_time_step,
+    warmup_nm_for,
+)
 from stickslip.simulators.lanes import prepare_lanes
-from stickslip.units import eta_from
+from stickslip.units import EV_TO_NN_NM, eta_from
 
 
 @dataclass
@@ -49,6 +54,24 @@ def _per_trajectory(value, default: float, n: int, name: str) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise SettingsError(f"{name} must be finite")
     return arr
+
+
+def _barrier_factor(modulation, n: int) -> np.ndarray:
+    """The largest factor the modulation puts on each trajectory's barrier."""
+    if modulation is None:
+        return np.ones(n)
+    return 1.0 + np.abs(np.broadcast_to(np.asarray(modulation[0], float), (n,)))
+
+
+def _defect_curvature_N_m(U0: np.ndarray, defects) -> np.ndarray:
+    """An upper bound of the defects' curvature per trajectory (N/m): ``|h| U0 / w^2``
+    summed over its Gaussians."""
+    if defects is None:
+        return np.zeros(U0.size)
+    _, h, w = (np.atleast_2d(np.asarray(v, float)) for v in defects)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = np.where(w > 0, np.abs(h) / (w * w), 0.0)
+    return np.broadcast_to(np.nansum(c, axis=1), U0.shape) * U0 * EV_TO_NN_NM
 
 
 def simulate(
@@ -124,6 +147,8 @@ def simulate(
     ]:
         if not np.all(ok):
             raise SettingsError(msg)
+    check_stable_time_step(s.dt_s, U0 * _barrier_factor(modulation, n), K, a, m,
+                           _defect_curvature_N_m(U0, defects))  # fmt: skip
     idx = np.arange(n) if indices is None else np.asarray(indices, dtype=np.int64)
     warm = warmup_nm_for(U0, K, a, s.warmup_nm)
     record_fine = samples_per_pixel > 0
