@@ -85,6 +85,19 @@ def test_resolve_prefers_the_user_then_the_file():
     assert c.lattice_source == c.velocity_source == c.temperature_source == "model"
 
 
+def test_a_table_whose_every_row_is_refused_has_the_same_columns(estimator, traces):
+    # code written against one table (df["U0_eV"]) must not break on a file of refusals
+    full = estimator.predict(traces).columns
+    refused = estimator.predict(traces[-1:])
+    assert refused.rows[0]["quality"] != "ok"
+    cols = refused.columns
+    assert cols[:3] == list(HEAD) and cols[3:7] == list(TARGETS)
+    assert cols[7:11] == list(STD_COLUMNS)
+    assert [c for c in full if c in cols] == [c for c in cols if c in full]  # same order
+    frame = refused.to_frame()
+    assert frame["U0_eV"].isna().all() and list(frame.columns) == cols
+
+
 def test_a_refused_trace_is_a_row_with_its_reason(traces):
     for name in ("window", None):
         row = load_estimator(name).predict(traces).rows[-1]

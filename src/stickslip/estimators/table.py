@@ -197,9 +197,19 @@ class ResultTable:
         for r in self.rows:
             for k in r:
                 seen.setdefault(k, None)
-        std = [c for c in COLUMNS if c in seen]
+        always: set[str] = set()
+        if self.estimator:
+            # an estimator's table has its estimates as columns even where every row was
+            # refused (code reading df["U0_eV"] must not depend on the data): in nN units
+            # unless the rows carry only volts
+            nN = any(c in seen for c in (*TARGETS[:3], *STD_COLUMNS[:3]))
+            volts = any(c in seen for c in (*VOLT_TARGETS, *VOLT_STD_COLUMNS))
+            always.update((TARGETS[3], STD_COLUMNS[3]))
+            if nN or not volts:
+                always.update((*TARGETS[:3], *STD_COLUMNS[:3]))
         if self.intervals:  # intervals are columns even if every value is missing
-            std = [c for c in COLUMNS if c in seen or c in INTERVAL_COLUMNS]
+            always.update(INTERVAL_COLUMNS)
+        std = [c for c in COLUMNS if c in seen or c in always]
         return std + [c for c in seen if c not in COLUMNS]
 
     def ok(self) -> list[dict[str, Any]]:
