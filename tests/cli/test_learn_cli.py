@@ -155,6 +155,26 @@ def test_demo_runs(tmp_path):
     assert len(list((tmp_path / "demo" / "plots").glob("*.png"))) == 6
 
 
+def test_demo_into_a_file_is_one_usage_error(tmp_path):
+    f = tmp_path / "results.csv"
+    f.write_text("keep me\n")
+    r = _run(["demo", "--out", f])
+    assert r.exit_code == 2 and "Traceback" not in r.output
+    (e,) = _errors(r)
+    assert "is a file" in e and f.read_text() == "keep me\n"
+
+
+def test_a_missing_path_is_not_found_whatever_its_name(traces, tmp_path):
+    # a mistyped folder has no suffix: it is missing, not of an unknown format
+    r = _run(["infer", tmp_path / "scans_typo", traces / "good0.csv", "--out", tmp_path / "r.csv"])
+    assert r.exit_code == 1
+    (e,) = _errors(r)
+    assert "scans_typo: file not found" in e
+    (tmp_path / "notes.xyz").write_text("1,2\n")
+    r = _run(["infer", tmp_path / "notes.xyz", "--out", tmp_path / "r2.csv"])
+    assert "unknown file format '.xyz'" in _errors(r)[0]
+
+
 def test_infer_reader_options_are_checked(traces, tmp_path):
     r = _run(["infer", traces, "--loads", "1,2", "--out", tmp_path / "r.csv"])
     assert r.exit_code == 2 and "lines-per-load" in r.stderr

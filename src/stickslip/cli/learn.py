@@ -368,7 +368,12 @@ def demo_cmd(
     out: Path = typer.Option(Path("stickslip-demo"), "--out", "-o", help="Output folder."),
 ) -> None:
     """'infer' with the bundled model on the bundled example traces (true values beside)."""
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        usage_error(f"--out {out} is a file; the demo writes a folder (results.csv, plots/)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        usage_error(f"--out {out}: cannot make the folder ({e.strerror or e})")
     traces, truth = load_examples()
     info(f"bundled model on {len(traces)} example traces (true values in the last columns)")
     code = run_estimation(

@@ -83,10 +83,12 @@ def _guarded(path: Path, fn: Callable[[], Any]) -> Any:
 
 def _existing(path: str | os.PathLike) -> Path:
     p = Path(path)
-    if not is_readable_suffix(p):
-        raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}'")
+    # a path that is not there is that first, whatever its name (a mistyped folder has
+    # no suffix, and "unknown file format" would send the user looking for a reader)
     if not p.exists():
         raise TraceReadError(p, "file not found")
+    if not is_readable_suffix(p):
+        raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}'")
     if p.is_dir() and not is_dataset_dir(p):
         raise TraceReadError(p, "is a directory")
     return p
