@@ -164,6 +164,15 @@ def test_demo_into_a_file_is_one_usage_error(tmp_path):
     assert "is a file" in e and f.read_text() == "keep me\n"
 
 
+def test_plots_into_a_file_is_one_usage_error_before_the_work(traces, tmp_path):
+    f = tmp_path / "plots"
+    f.write_text("keep me\n")
+    r = _run(["infer", traces / "good0.csv", "--out", tmp_path / "r.csv", "--plots", f])
+    assert r.exit_code == 2 and "Traceback" not in r.output
+    (e,) = _errors(r)
+    assert "--plots" in e and not (tmp_path / "r.csv").exists()
+
+
 def test_a_missing_path_is_not_found_whatever_its_name(traces, tmp_path):
     # a mistyped folder has no suffix: it is missing, not of an unknown format
     r = _run(["infer", tmp_path / "scans_typo", traces / "good0.csv", "--out", tmp_path / "r.csv"])

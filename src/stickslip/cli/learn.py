@@ -90,6 +90,8 @@ def run_estimation(
     if report is not None and (report.suffix.lower() not in (".html", ".htm")
                                or not report.parent.exists()):  # fmt: skip
         usage_error(f"{report}: --report needs an .html file in an existing folder")
+    if plots is not None and plots.exists() and not plots.is_dir():
+        usage_error(f"--plots {plots} is a file; it names a folder for the panels")
     _check_conditions(lattice, velocity, temperature)
     opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
     if examples:
