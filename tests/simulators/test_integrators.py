@@ -115,3 +115,9 @@ def test_a_sweep_config_beyond_the_stability_limit_is_refused_before_any_run():
     with pytest.raises(SettingsError, match="stability limit"):
         SweepConfig(physics=PhysicalSettings(dt_s=1e-6), ranges=ParameterRange())
     SweepConfig()  # the default preset's step is well inside
+    # narrow defects stiffen the potential the sweep would draw: refused at the preset step
+    from stickslip.simulators import SubstrateAugmentation
+
+    sharp = SubstrateAugmentation(defects_per_line=(0, 4), defect_width_nm=(0.002, 0.01))
+    with pytest.raises(SettingsError, match="stability limit"):
+        SweepConfig(augmentation=sharp)

@@ -49,7 +49,8 @@ def check_stable_time_step(dt_s: float, U0_eV, K_N_m, lattice_nm, mass_kg,
         raise SettingsError(
             f"time step {dt_s:.3g} s is beyond the integrator's stability limit "
             f"{STABLE_OMEGA_DT / omega:.3g} s (2/omega_max at the stiffest point of the "
-            "potential, spring and mass given): use a smaller --dt, or check U0, K and the mass"
+            "potential, spring and mass given): use a smaller time step (--dt), or check U0, "
+            "K and the mass"
         )
 
 
@@ -211,10 +212,15 @@ class SweepConfig:
     backend: str = "cpu"
 
     def __post_init__(self) -> None:
-        # the box's stiffest corner at the settings' step: refused before any shard runs
-        p = self.physics
-        check_stable_time_step(p.dt_s, self.ranges.U0_eV[1], self.ranges.K_N_m[1],
-                               p.lattice_nm, p.mass_kg)  # fmt: skip
+        # the box's stiffest corner at the settings' step, with the augmentation's largest
+        # modulation and defects: refused before any shard runs
+        p, aug = self.physics, self.augmentation
+        U0 = self.ranges.U0_eV[1] * (1.0 + max(abs(a) for a in aug.modulation_amplitude))
+        h = max(abs(v) for v in aug.defect_height)
+        w = min(aug.defect_width_nm)
+        defects = aug.defects_per_line[1] * h / (w * w) * U0 * EV_TO_NN_NM if w > 0 else 0.0
+        check_stable_time_step(p.dt_s, U0, self.ranges.K_N_m[1], p.lattice_nm, p.mass_kg,
+                               defects)  # fmt: skip
 
     def to_json(self) -> str:
         """The whole configuration as JSON (stored in every sweep file)."""
