@@ -184,6 +184,23 @@ def test_a_missing_path_is_not_found_whatever_its_name(traces, tmp_path):
     assert "unknown file format '.xyz'" in _errors(r)[0]
 
 
+def test_a_folder_without_readable_files_is_named(traces, tmp_path):
+    # before: it vanished without a word ("no input could be read"), or silently beside
+    # good inputs
+    empty = tmp_path / "scans"
+    empty.mkdir()
+    (empty / "notes.docx").write_text("x")
+    out = tmp_path / "r.csv"
+    r = _run(["infer", empty, traces / "good0.csv", "--out", out])
+    assert r.exit_code == 1
+    (e,) = _errors(r)
+    assert "scans: the folder holds no file of a readable format" in e
+    rows = list(csv.DictReader(out.open()))
+    assert [row["quality"] for row in rows if row["trace"] == "good0"] == ["ok"]
+    r = _run(["inspect", empty])
+    assert r.exit_code == 1 and "holds no file of a readable format" in r.stderr
+
+
 def test_infer_reader_options_are_checked(traces, tmp_path):
     r = _run(["infer", traces, "--loads", "1,2", "--out", tmp_path / "r.csv"])
     assert r.exit_code == 2 and "lines-per-load" in r.stderr

@@ -147,9 +147,10 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[T
 
     A ``.zarr`` store is a dataset, kept as given (also inside an expanded folder).
 
-    Returns the paths and one error per empty argument: ``Path("")`` is the current
-    folder, so an empty argument (an unset shell variable) would otherwise read every
-    trace there, some of them twice.
+    Returns the paths and one error per empty argument (``Path("")`` is the current
+    folder, so an empty argument, an unset shell variable, would otherwise read every
+    trace there, some of them twice) and per folder that holds no file of a readable
+    format (it would otherwise vanish without a word).
     """
     out: list[Path] = []
     errors: list[TraceReadError] = []
@@ -159,8 +160,13 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[T
             continue
         p = Path(raw)
         if p.is_dir() and not is_dataset_dir(p):
-            out.extend(sorted(q for q in p.iterdir()
-                              if (q.is_file() or is_dataset_dir(q)) and is_readable_suffix(q)))
+            found = sorted(q for q in p.iterdir()
+                           if (q.is_file() or is_dataset_dir(q)) and is_readable_suffix(q))
+            if not found:
+                errors.append(TraceReadError(p, "the folder holds no file of a readable "
+                                                "format (.csv, .spm, .gwy, ... see 'What it "
+                                                "reads' in the README)"))  # fmt: skip
+            out.extend(found)
         else:
             out.append(p)
     return out, errors
