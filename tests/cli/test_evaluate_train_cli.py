@@ -82,6 +82,21 @@ def test_evaluate_duplicate_truth_names_are_left_out(labelled, tmp_path):
     assert json.loads((tmp_path / "ev" / "metrics.json").read_text())["U0_eV"]["n"] == 5
 
 
+@pytest.mark.parametrize(("make", "words"), [
+    (lambda p: None, "truth table not found"),
+    (lambda p: p.mkdir(), "is a folder; --truth needs a table file"),
+    (lambda p: p.write_bytes(b"\xff\xfe\x00\xd8garbage"), "truth table is not text"),
+])  # fmt: skip
+def test_evaluate_unreadable_truth_table_is_one_sentence(labelled, tmp_path, make, words):
+    truth = tmp_path / "truth.csv"
+    make(truth)
+    r = _run(["evaluate", labelled / "traces", "--truth", truth, "--model", "classical",
+              "--out", tmp_path / "ev"])  # fmt: skip
+    assert r.exit_code == 2 and "Errno" not in r.output
+    (e,) = _errors(r)
+    assert words in e
+
+
 def test_evaluate_a_sweep_reads_its_truths(tmp_path):
     data = run_sweep(SweepConfig(n=12, seed=31), tmp_path / "s.h5", progress=False)
     r = _run(["evaluate", "--data", data, "--model", "window", "--out", tmp_path / "ev"])

@@ -92,8 +92,14 @@ def truth_from_table(path: str | os.PathLike) -> dict[str, dict[str, float]]:
     """
     try:
         rows = read_table(path)
-    except (OSError, UnicodeDecodeError) as e:
-        raise TruthError(f"{path}: cannot read truth table ({e})") from None
+    except FileNotFoundError:
+        raise TruthError(f"{path}: truth table not found") from None
+    except IsADirectoryError:
+        raise TruthError(f"{path}: is a folder; --truth needs a table file (.csv, .json)") from None
+    except UnicodeDecodeError:
+        raise TruthError(f"{path}: truth table is not text (a CSV or JSON table)") from None
+    except OSError as e:
+        raise TruthError(f"{path}: cannot read truth table ({e.strerror or e})") from None
     if not rows or "trace" not in rows[0]:
         raise TruthError(f"{path}: truth table needs columns {', '.join(TRUTH_COLUMNS)}")
     if not any(k in rows[0] for k in TARGETS):
