@@ -38,6 +38,17 @@ def omega_max_per_s(U0_eV, K_N_m, lattice_nm, mass_kg, extra_N_m=0.0) -> np.ndar
     return np.sqrt(stiffness / np.asarray(mass_kg, float))
 
 
+def gaussian_curvature_N_m(U0_eV, height_in_U0, width_nm) -> np.ndarray:
+    """The largest curvature (N/m) of a Gaussian bump of height ``height_in_U0 * U0`` and
+    std ``width_nm`` (a defect of the augmented substrate): ``|h| U0 / w^2``; 0 where
+    ``w <= 0``. Broadcasts."""
+    h = np.abs(np.asarray(height_in_U0, float))
+    w = np.asarray(width_nm, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_eV = np.where(w > 0, h / (w * w), 0.0)
+    return per_eV * np.asarray(U0_eV, float) * EV_TO_NN_NM
+
+
 def check_stable_time_step(dt_s: float, U0_eV, K_N_m, lattice_nm, mass_kg,
                            extra_N_m=0.0) -> None:  # fmt: skip
     """Raise :class:`SettingsError` where ``dt_s`` is beyond the integrator's stability
@@ -214,13 +225,12 @@ class SweepConfig:
     def __post_init__(self) -> None:
         # the box's stiffest corner at the settings' step, with the augmentation's largest
         # modulation and defects: refused before any shard runs
-        p, aug = self.physics, self.augmentation
-        U0 = self.ranges.U0_eV[1] * (1.0 + max(abs(a) for a in aug.modulation_amplitude))
+        p, aug, U0 = self.physics, self.augmentation, self.ranges.U0_eV[1]
         h = max(abs(v) for v in aug.defect_height)
-        w = min(aug.defect_width_nm)
-        defects = aug.defects_per_line[1] * h / (w * w) * U0 * EV_TO_NN_NM if w > 0 else 0.0
-        check_stable_time_step(p.dt_s, U0, self.ranges.K_N_m[1], p.lattice_nm, p.mass_kg,
-                               defects)  # fmt: skip
+        defects = aug.defects_per_line[1] * gaussian_curvature_N_m(U0, h, min(aug.defect_width_nm))
+        modulated = U0 * (1.0 + max(abs(a) for a in aug.modulation_amplitude))
+        check_stable_time_step(p.dt_s, modulated, self.ranges.K_N_m[1], p.lattice_nm,
+                               p.mass_kg, defects)  # fmt: skip
 
     def to_json(self) -> str:
         """The whole configuration as JSON (stored in every sweep file)."""

@@ -11,10 +11,11 @@ from stickslip.simulators.config import (
     PhysicalSettings,
     SettingsError,
     check_stable_time_step,
+    gaussian_curvature_N_m,
     warmup_nm_for,
 )
 from stickslip.simulators.lanes import prepare_lanes
-from stickslip.units import EV_TO_NN_NM, eta_from
+from stickslip.units import eta_from
 
 
 @dataclass
@@ -64,14 +65,12 @@ def _barrier_factor(modulation, n: int) -> np.ndarray:
 
 
 def _defect_curvature_N_m(U0: np.ndarray, defects) -> np.ndarray:
-    """An upper bound of the defects' curvature per trajectory (N/m): ``|h| U0 / w^2``
-    summed over its Gaussians."""
+    """An upper bound of the defects' curvature per trajectory (N/m): the sum of its
+    Gaussians' largest curvatures (:func:`~stickslip.simulators.config.gaussian_curvature_N_m`)."""
     if defects is None:
         return np.zeros(U0.size)
     _, h, w = (np.atleast_2d(np.asarray(v, float)) for v in defects)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c = np.where(w > 0, np.abs(h) / (w * w), 0.0)
-    return np.broadcast_to(np.nansum(c, axis=1), U0.shape) * U0 * EV_TO_NN_NM
+    return np.nansum(gaussian_curvature_N_m(U0[:, None], h, w), axis=1)
 
 
 def simulate(
