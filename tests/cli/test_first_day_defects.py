@@ -131,6 +131,40 @@ def test_out_into_missing_folder_or_onto_a_directory_is_one_line_before_work(
         assert len(err) == 1 and err[0].startswith("stickslip: error: ") and str(out) in err[0]
 
 
+@pytest.mark.parametrize("args", [
+    ["friction-load", "{t}", "--out", "{o}.png"],
+    ["friction-load", "{t}", "--out", "{w}/f.png", "--csv", "{o}.csv"],
+    ["friction-load", "{t}", "--out", "{w}/f.png", "--fits", "{o}.csv"],
+    ["friction-velocity", "{t}", "--out", "{o}.csv", "--plot", "{w}/p.png"],
+    ["friction-velocity", "{t}", "--out", "{w}/r.csv", "--plot", "{o}.png"],
+    ["infer", "{t}", "--out", "{w}/r.csv", "--report", "{o}.html"],
+    ["train", "--recipe", "bundled", "--out", "{o}.pt"],
+])  # fmt: skip
+def test_every_output_in_a_missing_folder_or_under_a_file_is_one_line_before_work(
+        args, traces_dir, tmp_path, monkeypatch):  # fmt: skip
+    """Old: friction-load and friction-velocity made a mistyped folder (or failed with
+    'cannot write the outputs' after all the work) where infer refused it."""
+    import stickslip.diagnostics.load_fits as lf
+    import stickslip.jobs.train as tr
+    import stickslip.jobs.velocity as jv
+
+    def boom(*a, **k):
+        raise AssertionError("work began before the output paths were checked")
+
+    _no_work(monkeypatch)
+    for module, name in ((lf, "collect_friction_rows"), (jv, "run_friction_velocity"),
+                         (tr, "bundled_line_data")):  # fmt: skip
+        monkeypatch.setattr(module, name, boom)
+    (tmp_path / "a_file").write_text("keep me\n")
+    for bad, why in ((tmp_path / "typo" / "out", "does not exist"),
+                     (tmp_path / "a_file" / "out", "is a file, not a folder")):  # fmt: skip
+        res = _run([a.format(t=traces_dir, w=tmp_path, o=bad) for a in args])
+        assert res.exit_code == 2, res.output
+        err = _errors(res)
+        assert len(err) == 1 and why in err[0] and str(bad.parent) in err[0], err
+    assert not (tmp_path / "typo").exists() and (tmp_path / "a_file").read_text() == "keep me\n"
+
+
 def test_out_json_is_json_and_out_txt_is_refused_before_work(traces_dir, tmp_path,
                                                              monkeypatch):  # fmt: skip
     """Old: --out was always written as CSV whatever its extension (x.json held CSV)."""

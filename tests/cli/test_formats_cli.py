@@ -72,6 +72,7 @@ def test_inspect_usage_errors(ramp):
 
 def test_friction_load_ramp(ramp, tmp_path):
     out, table = tmp_path / "fl" / "friction.png", tmp_path / "fl" / "friction.csv"
+    out.parent.mkdir()
     files = [ramp / f for f in RAMP_FILES]
     r = _run(["friction-load", *files, "--out", out, "--csv", table])
     assert r.exit_code == 0, r.stderr

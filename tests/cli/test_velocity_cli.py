@@ -58,6 +58,7 @@ def test_friction_velocity_end_to_end_with_bad_inputs(tmp_path):
     junk = tmp_path / "junk.csv"
     junk.write_text("not,a,trace\n")
     out, plot = tmp_path / "res" / "fv.csv", tmp_path / "res" / "fv.png"
+    out.parent.mkdir()
     r = _run(["friction-velocity", *files, tmp_path / "s" / "line.csv", junk, "--out", out,
               "--plot", plot, "--check-lines", "8"])  # fmt: skip
     assert r.exit_code == 1, r.output

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -75,14 +76,27 @@ def usage_error(message: str) -> NoReturn:
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 
+def check_output_file(option: str, path: Path) -> None:
+    """A usage error, before any work, unless ``path`` can take an output file: it is
+    not a folder, and it lies in a folder that exists (a mistyped folder name is refused,
+    not made) and that this tool can write in."""
+    if path.is_dir():
+        usage_error(f"{option} {path} is a directory (it needs a file name)")
+    folder = path.parent
+    if not folder.is_dir():
+        what = "is a file, not a folder" if folder.exists() else "does not exist"
+        usage_error(f"{option} {path}: the folder {folder} {what}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        usage_error(f"{option} {path}: cannot write in the folder {folder}")
+
+
 def check_plot_path(option: str, path: Path) -> None:
     """A usage error, before any work, unless ``path`` names an image file this tool
-    writes (:data:`PLOT_SUFFIXES`)."""
+    writes (:data:`PLOT_SUFFIXES`) where it can write it (:func:`check_output_file`)."""
     if path.suffix.lower() not in PLOT_SUFFIXES:
         usage_error(f"{option} {path}: a plot is written as one of {', '.join(PLOT_SUFFIXES)} "
                     "(the suffix says which)")  # fmt: skip
-    if path.is_dir():
-        usage_error(f"{option} {path} is a directory")
+    check_output_file(option, path)
 
 
 def info(message: str) -> None:

@@ -15,6 +15,7 @@ from stickslip.cli.common import (
     EXIT_OK,
     LOADS_HELP,
     LPL_HELP,
+    check_output_file,
     check_plot_path,
     echo,
     error,
@@ -160,8 +161,8 @@ def friction_load_cmd(
     from stickslip.estimators.table import ResultTable, TableFormatError, table_format
 
     check_plot_path("--out", out)
-    if csv_out is not None and csv_out.is_dir():
-        usage_error(f"--csv {csv_out} is a directory")
+    if csv_out is not None:
+        check_output_file("--csv", csv_out)
     load_list = parse_loads_arg(loads)
     opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
                            None, load_unit)
@@ -170,6 +171,7 @@ def friction_load_cmd(
             table_format(fits)
         except TableFormatError as e:
             usage_error(str(e))
+        check_output_file("--fits", fits)
     failed = 0
     est_summary = None
     if estimates is not None:

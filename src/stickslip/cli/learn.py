@@ -18,6 +18,7 @@ from stickslip.cli.common import (
     EXIT_OK,
     LOADS_HELP,
     LPL_HELP,
+    check_output_file,
     echo,
     error,
     info,
@@ -65,10 +66,7 @@ def _check_out(out: Path) -> None:
         table_format(out)
     except TableFormatError as e:
         usage_error(str(e))
-    if out.is_dir():
-        usage_error(f"{out}: is a directory (--out needs a file name)")
-    if not out.parent.exists():
-        usage_error(f"{out}: folder {out.parent} does not exist")
+    check_output_file("--out", out)
 
 
 def _check_conditions(lattice: float | None, velocity: float | None,
@@ -87,9 +85,10 @@ def run_estimation(
 ) -> int:  # fmt: skip
     """The shared body of ``infer``, ``label`` and ``demo``; returns the exit code."""
     _check_out(out)
-    if report is not None and (report.suffix.lower() not in (".html", ".htm")
-                               or not report.parent.exists()):  # fmt: skip
-        usage_error(f"{report}: --report needs an .html file in an existing folder")
+    if report is not None:
+        if report.suffix.lower() not in (".html", ".htm"):
+            usage_error(f"--report {report}: the report is an .html file")
+        check_output_file("--report", report)
     if plots is not None and plots.exists() and not plots.is_dir():
         usage_error(f"--plots {plots} is a file; it names a folder for the panels")
     _check_conditions(lattice, velocity, temperature)
@@ -324,8 +323,7 @@ def train_cmd(
         usage_error("--epochs and --lr must be positive, --noise >= 0")
     if not 0.0 <= families <= 1.0 or workers < 0 or shuffle_rows < 1:
         usage_error("--families must be in [0, 1], --workers >= 0, --shuffle-rows >= 1")
-    if out.is_dir() or not out.parent.exists():
-        usage_error(f"{out}: cannot write a model file there")
+    check_output_file("--out", out)
     try:
         if recipe == "bundled":
             training = tr.bundled_line_data(work, progress=show_progress())

@@ -12,6 +12,7 @@ from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
     EXIT_OK,
+    check_output_file,
     check_plot_path,
     echo,
     error,
@@ -84,9 +85,8 @@ def friction_velocity_cmd(
         table_format(out)
     except TableFormatError as e:
         usage_error(str(e))
+    check_output_file("--out", out)
     check_plot_path("--plot", plot)
-    if out.is_dir():
-        usage_error(f"{out} is a directory")
     opts = reading_options(calibration, None, None)
     if check:
         info("simulating the check series (slow velocities take longest) ...")
