@@ -182,6 +182,7 @@ def test_a_missing_path_is_not_found_whatever_its_name(traces, tmp_path):
     (tmp_path / "notes.xyz").write_text("1,2\n")
     r = _run(["infer", tmp_path / "notes.xyz", "--out", tmp_path / "r2.csv"])
     assert "unknown file format '.xyz'" in _errors(r)[0]
+    assert ".csv" in _errors(r)[0] and ".spm" in _errors(r)[0]  # what it does read
 
 
 def test_a_folder_without_readable_files_is_named(traces, tmp_path):

@@ -88,7 +88,9 @@ def _existing(path: str | os.PathLike) -> Path:
     if not p.exists():
         raise TraceReadError(p, "file not found")
     if not is_readable_suffix(p):
-        raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}'")
+        known = ", ".join(sorted({*READERS, *SCAN_READERS}))
+        raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}' (readable: "
+                                f"{known}, Bruker's .000-.999)")  # fmt: skip
     if p.is_dir() and not is_dataset_dir(p):
         raise TraceReadError(p, "is a directory")
     return p
