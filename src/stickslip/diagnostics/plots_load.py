@@ -65,7 +65,9 @@ def plot_versus_load(
         for name, xs, ys in (curves or {}).get(key, ()):
             ax.plot(xs, ys, label=name)
         if curves and curves.get(key):
-            ax.legend(fontsize=7, loc="lower right")
+            # above the panel: inside, the fits' long labels covered data points
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.01),
+                      borderaxespad=0.0, frameon=False)  # fmt: skip
         if not any(math.isfinite(m) for m in means):
             ax.text(0.5, 0.5, "no estimate in any load group", transform=ax.transAxes,
                     ha="center", va="center", color="0.4")  # fmt: skip
@@ -73,11 +75,11 @@ def plot_versus_load(
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel(f"load / setpoint ({unit})" if unit else "load / setpoint")
     if title:
-        axes[0, 0].set_title(title)
+        fig.suptitle(title)
     fig.tight_layout()
     suffix = os.path.splitext(os.fspath(out))[1] or ".png"
     try:
         with atomic_path(out, suffix=suffix) as tmp:
-            fig.savefig(tmp, format=suffix.lstrip("."), dpi=120)
+            fig.savefig(tmp, format=suffix.lstrip("."), dpi=120, bbox_inches="tight")
     finally:
         plt.close(fig)
