@@ -111,6 +111,9 @@ def test_train_line_on_a_small_sweep_then_infer_with_it(tmp_path):
     r = _run(["train", "--kind", "line", "--data", data, "--epochs", 2, "--members", 1,
               "--out", model])  # fmt: skip
     assert r.exit_code == 0, r.output
+    # the held-out errors the user should see before trusting the model
+    (val,) = [ln for ln in r.stderr.splitlines() if ln.startswith("validation (")]
+    assert "<F> RMSE" in val and "U0" in val and "K" in val and " %" in val
     est = load_estimator(model)
     assert est.kind == "line" and len(est.ensemble.members) == 1
     r = _run(["infer", data, "--model", model, "--out", tmp_path / "r.csv", "--no-classical"])

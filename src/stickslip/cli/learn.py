@@ -349,8 +349,7 @@ def train_cmd(
             exp = tr.expert_model(expert, work)
             report = tr.train_line(training, out, cfg, exp, expert, progress=show_progress(),
                                    stream=StreamSettings(workers, shuffle_rows))
-            val = report.get("validation", {})
-            info(f"validation: {val}" if val else "trained")
+            info(tr.validation_line(report))
         else:
             cfg_w = TrainConfig(seed=seed, noise_nN=noise,
                                 **{k: v for k, v in (("epochs", epochs), ("lr", lr),

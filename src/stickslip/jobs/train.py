@@ -314,6 +314,19 @@ def train_line(training: TrainingData, out: str | os.PathLike, config: LineTrain
     return report
 
 
+def validation_line(report: dict[str, Any]) -> str:
+    """One line of a line model's errors on its held-out validation lines (the lines its
+    intervals were calibrated on), from :func:`train_line`'s report."""
+    n = report.get("n_calibration")
+    rel = report.get("val_rel_rmse") or {}
+    if n is None or not rel:
+        return "trained (no validation lines to report)"
+    names = {"log_U0_ref": "U0", "log_K_ref": "K", "log_eta": "eta"}
+    errors = ", ".join(f"{names.get(k, k)} {100 * v:.1f} %" for k, v in rel.items())
+    return (f"validation ({n} lines drawn on held-out trajectories): <F> RMSE "
+            f"{report.get('val_rmse_F_mean_nN', float('nan')):.3g} nN; relative RMSE {errors}")
+
+
 def train_window(training: TrainingData, out: str | os.PathLike, recipe: str, config: TrainConfig,
                  window: int = 64, stride: int | None = None, train_stride: int = 16,
                  progress: bool = True) -> tuple[TrainedModel, Any, np.ndarray]:  # fmt: skip
