@@ -136,6 +136,7 @@ def test_train_and_evaluate_small(tmp_path):
               "--window", 32, "--out", model])  # fmt: skip
     assert r.exit_code == 0, r.output
     assert model.exists() and model.with_suffix(".loss.png").exists()
+    assert "validation (" in r.stderr and "relative RMSE U0" in r.stderr
     r = _run(["evaluate", "--model", model, "--data", data, "--out", tmp_path / "ev"])
     assert r.exit_code == 0, r.output
     for name in ("metrics.json", "metrics.csv", "predictions.csv", "parity.png"):

@@ -349,14 +349,15 @@ def train_cmd(
             exp = tr.expert_model(expert, work)
             report = tr.train_line(training, out, cfg, exp, expert, progress=show_progress(),
                                    stream=StreamSettings(workers, shuffle_rows))
-            info(tr.validation_line(report))
+            info(tr.line_validation(report))
         else:
             cfg_w = TrainConfig(seed=seed, noise_nN=noise,
                                 **{k: v for k, v in (("epochs", epochs), ("lr", lr),
                                                      ("batch_size", batch_size))
                                    if v is not None})  # fmt: skip
-            tr.train_window(training, out, features, cfg_w, window, None, train_stride,
-                            progress=show_progress())  # fmt: skip
+            model, _, _ = tr.train_window(training, out, features, cfg_w, window, None,
+                                          train_stride, progress=show_progress())  # fmt: skip
+            info(tr.window_validation(model))
     except (FeatureError, ValueError, ModelFileError) as e:
         usage_error(str(e))
     info(f"wrote {out}")

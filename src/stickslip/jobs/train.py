@@ -314,17 +314,29 @@ def train_line(training: TrainingData, out: str | os.PathLike, config: LineTrain
     return report
 
 
-def validation_line(report: dict[str, Any]) -> str:
-    """One line of a line model's errors on its held-out validation lines (the lines its
-    intervals were calibrated on), from :func:`train_line`'s report."""
-    n = report.get("n_calibration")
+def _validation_line(n: int, F_rmse_nN: float, rel_rmse: dict[str, float]) -> str:
+    errors = ", ".join(f"{k} {100 * v:.1f} %" for k, v in rel_rmse.items())
+    return f"validation ({n} lines): <F> RMSE {F_rmse_nN:.3g} nN; relative RMSE {errors}"
+
+
+def line_validation(report: dict[str, Any]) -> str:
+    """One line of a line model's errors on its validation lines (drawn on held-out
+    trajectories; its intervals are calibrated on them), from :func:`train_line`'s
+    report."""
     rel = report.get("val_rel_rmse") or {}
-    if n is None or not rel:
-        return "trained (no validation lines to report)"
     names = {"log_U0_ref": "U0", "log_K_ref": "K", "log_eta": "eta"}
-    errors = ", ".join(f"{names.get(k, k)} {100 * v:.1f} %" for k, v in rel.items())
-    return (f"validation ({n} lines drawn on held-out trajectories): <F> RMSE "
-            f"{report.get('val_rmse_F_mean_nN', float('nan')):.3g} nN; relative RMSE {errors}")
+    return _validation_line(int(report.get("n_calibration", 0)),
+                            float(report.get("val_rmse_F_mean_nN", float("nan"))),
+                            {names.get(k, k): float(v) for k, v in rel.items()})  # fmt: skip
+
+
+def window_validation(model: TrainedModel) -> str:
+    """The same line for a window model, from the validation metrics it records."""
+    m = model.metrics.get("validation") or {}
+    get = lambda k, what: float((m.get(k) or {}).get(what, float("nan")))  # noqa: E731
+    return _validation_line(int(get("U0_eV", "n")), get("F_mean_nN", "rmse"),
+                            {"U0": get("U0_eV", "rel_rmse"), "K": get("K_N_m", "rel_rmse"),
+                             "eta": get("eta", "rel_rmse")})  # fmt: skip
 
 
 def train_window(training: TrainingData, out: str | os.PathLike, recipe: str, config: TrainConfig,
