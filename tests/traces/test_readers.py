@@ -74,6 +74,26 @@ def test_force_in_volts_with_and_without_calibration(tmp_path):
     assert c.meta["unit"] == "nN" and c.force_nN[1] == pytest.approx(10.2)
 
 
+@pytest.mark.parametrize(("x_col", "x_to_nm", "f_col", "f_to_nN"), [
+    ("x_um", 1e3, "force_N", 1e9), ("x_A", 0.1, "force_pN", 1e-3),
+    ("x_m", 1e9, "force_uN", 1e3), ("x_pm", 1e-3, "force_nN", 1.0),
+])  # fmt: skip
+def test_columns_in_other_units_are_converted_to_nm_and_nN(tmp_path, x_col, x_to_nm, f_col,
+                                                           f_to_nN):  # fmt: skip
+    x, f = np.arange(N) * 0.5, 1.0 + np.sin(np.arange(N))
+    body = "\n".join(f"{a!r},{b!r}" for a, b in zip(x.tolist(), f.tolist(), strict=True))
+    (t,), errors = collect_traces([_write(tmp_path / "u.csv", f"{x_col},{f_col}\n{body}")])
+    assert not errors and t.meta["unit"] == "nN" and t.meta["calibrated"] is True
+    np.testing.assert_allclose(t.x_nm, x * x_to_nm, rtol=1e-12)
+    np.testing.assert_allclose(t.force_nN, f * f_to_nN, rtol=1e-12)
+
+
+def test_an_unknown_unit_names_the_units_read(tmp_path):
+    body = "\n".join(f"{i},{i}" for i in range(N))
+    _, (e,) = collect_traces([_write(tmp_path / "u.csv", f"x_inch,force_lbf\n{body}")])
+    assert "x_inch,force_lbf" in str(e) and "um" in str(e) and "pN" in str(e)
+
+
 def test_trace_retrace_columns_tab_separated(tmp_path):
     x = np.arange(N) * 0.5
     tr, rt = 1.0 + 0.1 * np.sin(x), -1.0 + 0.1 * np.cos(x)

@@ -3,12 +3,17 @@
 Recognised column layouts (header names, any order; comma, tab, semicolon or
 whitespace separated; ``#`` lines are comments):
 
-- ``x_nm,force_nN``: one trace in nN (the project's own format).
-- ``x_nm,force_V``: one trace in volts; converted with ``calibration_nN_per_V``,
-  else kept in volts and flagged (``meta["unit"] == "V"``, ``calibrated=False``).
-- ``trace,retrace`` (volts; or ``trace_V,retrace_V``, ``trace_nN,retrace_nN``),
-  optionally with ``x_nm`` or ``index``: one friction loop, read as one scan line
-  (trace, retrace reversed and sign-flipped, see :mod:`.maps`).
+- ``x_nm,force_nN``: one trace in nN (the project's own format). The unit is the part of
+  the name after ``_``: any length unit for ``x`` (``x_pm``, ``x_A``, ``x_um``, ``x_mm``,
+  ``x_m``) and any force unit for the force (``force_pN``, ``force_uN``, ``force_N``)
+  are converted to nm and nN.
+- ``x_nm,force_V`` (or ``force_mV``): one trace in volts; converted with
+  ``calibration_nN_per_V``, else kept in volts and flagged (``meta["unit"] == "V"``,
+  ``calibrated=False``).
+- ``trace,retrace`` (volts; or with a unit, ``trace_V,retrace_V``,
+  ``trace_nN,retrace_nN``), optionally with an ``x`` column or ``index``: one friction
+  loop, read as one scan line (trace, retrace reversed and sign-flipped, see
+  :mod:`.maps`).
 - No header, three numeric columns ``index, trace, retrace`` in volts (the layout
   of exported friction profiles such as ``exampleFrictionProfileFull.txt``).
 
@@ -30,16 +35,44 @@ from typing import Any
 
 import numpy as np
 
-from stickslip.traces.formats.common import RETRACE, TRACE, Channel, ScanFile, read_bytes
+from stickslip.traces.formats.common import (
+    RETRACE,
+    TRACE,
+    Channel,
+    ScanFile,
+    force_scale_to_nN,
+    length_to_nm,
+    read_bytes,
+    volt_scale_to_V,
+)
 from stickslip.traces.formats.maps import map_to_traces, to_force
 from stickslip.traces.trace import READ_NOTE, Trace, TraceReadError, validate_trace
 
-NEEDED = "needs columns x_nm,force_nN (or x_nm,force_V, or trace,retrace)"
+NEEDED = ("needs columns x_nm,force_nN (any length unit for x: pm, A, nm, um, mm, m; any force "
+          "or voltage unit for the force: pN, nN, uN, mN, N, V, mV), or trace,retrace")
 FORMAT_LOOP = "friction loop (text)"
-_LOOP_COLS = {TRACE: ("trace", "trace_V", "trace_mV", "trace_nN"),
-              RETRACE: ("retrace", "retrace_V", "retrace_mV", "retrace_nN")}
-_FORCE_COLS = {"force_nN": "nN", "force_V": "V", "force_mV": "mV"}
-_X_COLS = {"x_nm": 1.0, "x_um": 1e3}
+
+
+def _unit_columns(header: Sequence[str], prefix: str, bare: bool = False) -> tuple[str, ...]:
+    """The columns named ``<prefix>_<unit>`` whose unit this reader converts (lengths for
+    ``x``, forces or voltages otherwise), and the bare ``<prefix>`` where allowed (volts)."""
+    found = []
+    for h in header:
+        name, _, unit = h.partition("_")
+        if name != prefix or (not unit and not bare):
+            continue
+        if not unit or (prefix == "x" and _is_length(unit)) or (
+                prefix != "x" and (force_scale_to_nN(unit) or volt_scale_to_V(unit))):  # fmt: skip
+            found.append(h)
+    return tuple(found)
+
+
+def _is_length(unit: str) -> bool:
+    try:
+        length_to_nm(1.0, unit)
+    except ValueError:
+        return False
+    return True
 
 
 _SEPARATORS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
@@ -167,22 +200,22 @@ def traces_from_columns(
         or if the values do not form a valid trace.
     """
     header = [h.strip() for h in header]
-    xcol = _one(header, tuple(_X_COLS), path, "position")
-    fcol = _one(header, tuple(_FORCE_COLS), path, "force")
-    tcol = _one(header, _LOOP_COLS[TRACE], path, "trace")
-    rcol = _one(header, _LOOP_COLS[RETRACE], path, "retrace")
+    xcol = _one(header, _unit_columns(header, "x"), path, "position")
+    fcol = _one(header, _unit_columns(header, "force"), path, "force")
+    tcol = _one(header, _unit_columns(header, "trace", bare=True), path, "trace")
+    rcol = _one(header, _unit_columns(header, "retrace", bare=True), path, "retrace")
     col = {h: data[:, i] for i, h in enumerate(header)}
+    x = col[xcol] * length_to_nm(1.0, _unit_of(xcol)) if xcol else None
     if fcol and (tcol or rcol):
         raise TraceReadError(path, "ambiguous layout: both force and trace/retrace columns")
     if tcol and rcol:
         if _unit_of(tcol) != _unit_of(rcol):
             raise TraceReadError(path, f"mixed units: {tcol} and {rcol}")
-        x = col[xcol] * _X_COLS[xcol] if xcol else None
         return _loop_traces(path, col[tcol], col[rcol], _unit_of(tcol), x, **options)
     if fcol and (xcol or len(header) == 1):
-        x = col[xcol] * _X_COLS[xcol] if xcol else _positions(data.shape[0], options)
         pixels = xcol is None and not options.get("scan_size_nm")
-        return [_single_trace(path, x, col[fcol], _FORCE_COLS[fcol], options, pixels)]
+        x = _positions(data.shape[0], options) if x is None else x
+        return [_single_trace(path, x, col[fcol], _unit_of(fcol), options, pixels)]
     raise TraceReadError(path, f"{NEEDED} (found {','.join(header)})")
 
 
