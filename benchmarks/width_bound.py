@@ -11,10 +11,11 @@ and ln K, on the lines of even trajectories, and scoring them on the odd ones:
 2. ``+ statistics``: a small network on the spread and three statistics of the mapped
    line (its force std, its mean, and the median |second difference|, the noise);
 3. ``+ line``: the same with a 1D CNN that reads the whole mapped line;
-4. ``+ oracle``: the statistics plus what no line states, given as truth: which effect
-   families the line carries, whether its substrate is modulated (and how much) or
-   carries defects, whether it is a multi-asperity contact line and whether it is one of
-   the members' training-effect lines.
+4. ``+ substrate``: the statistics plus what no line states, given as truth: whether
+   its substrate is modulated (and how much) or carries defects, whether it is a
+   multi-asperity contact line and whether it is one of the members' training-effect
+   lines;
+5. ``+ oracle``: all that, and which effect families the line carries.
 
 For each: the mean interval score, the coverage and the median 95 % half-width (log
 units), on all test lines and on three groups: clean lines on a plain substrate (no
@@ -206,7 +207,8 @@ def main() -> None:
     noise = np.median(np.abs(np.diff(X, 2, axis=1)), axis=1)
     stats = np.column_stack([np.log(s), np.log(std[:, 0]), np.log(noise + 1e-6),
                              np.log(np.abs(mean[:, 0]) + 1e-3)])  # fmt: skip
-    oracle = np.column_stack([stats, fam, modulation, defects > 0, contact, is_training])
+    substrate = np.column_stack([stats, modulation, defects > 0, contact, is_training])
+    oracle = np.column_stack([substrate, fam])
     precursor = fam[:, fx.FAMILIES.index("precursor")].astype(float)
     fit, test = traj % 2 == 0, traj % 2 == 1
     inner = fit & ((traj // 2) % 10 == 0)
@@ -216,6 +218,7 @@ def main() -> None:
     scale, power = power_fit(a[fit], s[fit], np.ones(int(fit.sum())))
     halves["spread"] = 1.959964 * scale * s ** power
     for name, scalars, read in (("+ statistics", stats, False), ("+ line", stats, True),
+                                ("+ substrate", substrate, False),
                                 ("+ oracle", oracle, False)):  # fmt: skip
         t1 = time.perf_counter()
         net = train_sizer(Xn, scalars, a, precursor, train, inner, read, args.epochs)
