@@ -83,7 +83,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -550,6 +550,11 @@ def main() -> None:
         help="multiply every level's line count (smoke tests; changes the sets)",
     )
     ap.add_argument("--regenerate", action="store_true", help="ignore the cache")
+    ap.add_argument("--contact", default="any",
+                    help="the contact stated to the line model (any, ideal: --contact)")
+    ap.add_argument("--seed-shift", type=int, default=0,
+                    help="move every set's seed by this (fresh sets within 41001-41099, "
+                         "cached under --cache/shiftN)")  # fmt: skip
     ap.add_argument(
         "--code-note",
         default=None,
@@ -557,9 +562,11 @@ def main() -> None:
     )
     args = ap.parse_args()
     t_start = time.perf_counter()
-    from stickslip.estimators.load import load_estimator
+    from stickslip.estimators.load import load_estimator, state_contact
 
-    specs = set_specs(args.scale)
+    specs = {name: replace(spec, seed=spec.seed + args.seed_shift)
+             for name, spec in set_specs(args.scale).items()}
+    cache = args.cache / f"shift{args.seed_shift}" if args.seed_shift else args.cache
     names = [s.strip() for s in args.sets.split(",") if s.strip()]
     unknown = [s for s in names if s not in specs]
     if unknown:
@@ -577,7 +584,7 @@ def main() -> None:
           f"({prov['package']}" + (f", HEAD {prov['repo_head'][:10]}" if "repo_head" in prov
                                    else "") + ")" + (f"; {args.code_note}" if args.code_note
                                                       else ""))  # fmt: skip
-    estimator = load_estimator(args.model)
+    estimator = state_contact(load_estimator(args.model), args.contact)
     print(f"estimator: {estimator.describe()}")
     draw = Draw()
     results: dict[str, Any] = {}
@@ -585,7 +592,7 @@ def main() -> None:
     for name in names:
         spec = specs[name]
         t0 = time.perf_counter()
-        ls = cached_set(spec, draw, args.cache, args.regenerate)
+        ls = cached_set(spec, draw, cache, args.regenerate)
         t_gen = time.perf_counter() - t0
         groups, t_pred = score_set(ls, estimator)
         timing[name] = {"load_or_generate_s": t_gen, "predict_s": t_pred}

@@ -19,8 +19,9 @@ from typing import Any
 
 from stickslip.conditions import GRAPHITE
 from stickslip.estimators.base import Estimator
+from stickslip.estimators.line.ensemble import ANY_CONTACT
 from stickslip.estimators.line.training import LineTrainConfig
-from stickslip.estimators.load import load_estimator
+from stickslip.estimators.load import load_estimator, state_contact
 from stickslip.estimators.table import ResultTable
 from stickslip.estimators.window.training import TrainConfig
 from stickslip.jobs import evaluate as ev
@@ -53,14 +54,18 @@ def _traces(inputs: Sequence[Trace] | Sequence[PathLike]
 def predict(inputs: Sequence[Trace] | Sequence[PathLike],
             model: Estimator | PathLike | None = None, *, lattice_nm: float | None = None,
             velocity_nm_per_s: float | None = None, temperature_K: float | None = None,
-            classical: bool = False, check: bool = False) -> ResultTable:  # fmt: skip
+            classical: bool = False, check: bool = False,
+            contact: str = ANY_CONTACT) -> ResultTable:  # fmt: skip
     """Estimates for traces (or the files holding them): one row per trace, and per
     unreadable input; ``.to_frame()`` gives a DataFrame.
 
     ``model``: an :class:`Estimator`, a model file, ``"classical"``, ``"window"``, or
-    None for the bundled whole-line model.
+    None for the bundled whole-line model. ``contact``: ``"ideal"`` where the tip is one
+    asperity on a crystal without modulation or defects along the line (the line model's
+    calibration for such contacts; :data:`~stickslip.estimators.line.ensemble.CONTACTS`).
     """
     est = model if isinstance(model, Estimator) else load_estimator(model)
+    est = state_contact(est, contact)
     traces, errors = _traces(inputs)
     return inf.infer(est, traces, errors, lattice_nm=lattice_nm,
                      velocity_nm_per_s=velocity_nm_per_s, temperature_K=temperature_K,

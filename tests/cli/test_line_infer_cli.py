@@ -64,3 +64,47 @@ def test_damaged_model_file_is_one_line(tmp_path, line_model):
                               "--out", str(tmp_path / "o.csv")])  # fmt: skip
     assert res.exit_code == 2
     assert len(res.stderr.strip().splitlines()) == 1 and "bad.pt" in res.stderr
+
+
+def _half_widths(path) -> dict[str, float]:
+    return {r["trace"]: (np.log(float(r["U0_eV_hi95"])) - np.log(float(r["U0_eV_lo95"]))) / 2
+            for r in csv.DictReader(open(path))}  # fmt: skip
+
+
+def test_a_stated_ideal_contact_narrows_u0_where_the_examples_are_quiet(tmp_path, line_model):
+    from stickslip.jobs.demo import examples_dir
+
+    ex = str(examples_dir())
+    for contact, out in (("any", tmp_path / "any.csv"), ("ideal", tmp_path / "ideal.csv")):
+        res = runner.invoke(app, ["infer", ex, "--out", str(out), "--contact", contact])
+        assert res.exit_code == 0, res.output
+    assert "stated contact: ideal" in res.stderr
+    any_, ideal = _half_widths(tmp_path / "any.csv"), _half_widths(tmp_path / "ideal.csv")
+    assert set(any_) == set(ideal) and len(any_) == 6
+    # the bundled calibration for one asperity on a plain crystal: narrower in every
+    # example, and at least halved on the three noise-free graphene lines
+    assert all(ideal[k] < any_[k] for k in any_), (any_, ideal)
+    clean = [k for k in any_ if k.startswith("graphene_clean")]
+    assert len(clean) == 3 and all(ideal[k] < 0.5 * any_[k] for k in clean)
+    # a contact no calibration is for, or an estimator without one per contact: one line
+    for args, words in ((["--contact", "tip"], "must be one of any, ideal"),
+                        (["--contact", "ideal", "--model", "classical"], "classical"),
+                        (["--contact", "ideal", "--model", str(line_model)],
+                         "no calibration for the contact 'ideal'")):  # fmt: skip
+        res = runner.invoke(app, ["infer", ex, "--out", str(tmp_path / "x.csv"), *args])
+        assert res.exit_code == 2 and words in res.stderr, res.output
+        assert not (tmp_path / "x.csv").exists()
+
+
+def test_predict_with_a_stated_contact_leaves_the_callers_estimator_alone():
+    import stickslip
+    from stickslip.estimators.load import load_estimator
+    from stickslip.jobs.demo import load_examples
+
+    traces, _ = load_examples()
+    est = load_estimator(None)
+    stated = stickslip.predict(traces[:2], est, contact="ideal")
+    default = stickslip.predict(traces[:2], est)
+    assert est.contact == "any"
+    assert all(s["U0_eV_hi95"] - s["U0_eV_lo95"] < d["U0_eV_hi95"] - d["U0_eV_lo95"]
+               for s, d in zip(stated.rows, default.rows, strict=True))  # fmt: skip

@@ -30,9 +30,10 @@ from stickslip.cli.common import (
 )
 from stickslip.conditions import GRAPHITE, check_values
 from stickslip.estimators.base import Estimator
+from stickslip.estimators.line.ensemble import ANY_CONTACT
 from stickslip.estimators.line.streaming import StreamSettings
 from stickslip.estimators.line.training import LineTrainConfig, family_settings
-from stickslip.estimators.load import load_estimator
+from stickslip.estimators.load import load_estimator, state_contact
 from stickslip.estimators.table import TableFormatError, has_estimate, table_format
 from stickslip.estimators.window.features import FeatureError
 from stickslip.estimators.window.modelfile import ModelFileError
@@ -50,13 +51,17 @@ VELOCITY_HELP = "Scan velocity in nm/s (wins over the file's; default: the estim
 SPLIT_HELP = ("Where the verdict finds a trace changing part-way (a tip change, "
               "change_nm), estimate each part on its own too (one more row each).")
 REPORT_HELP = "Also write one self-contained HTML report of the run (opens offline)."
+CONTACT_HELP = ("The contact, if you know it: 'any' (default: the calibration covers "
+                "multi-asperity tips and modulated or defective substrates) or 'ideal' (one "
+                "asperity on a crystal without modulation or defects along the line: "
+                "narrower U0 intervals). The line model only.")
 TEMPERATURE_HELP = "Temperature in K (wins over the file's; default: the estimator's, 296)."
 
 
-def _estimator(spec: str | None) -> Estimator:
+def _estimator(spec: str | None, contact: str = ANY_CONTACT) -> Estimator:
     try:
-        return load_estimator(spec)
-    except ModelFileError as e:
+        return state_contact(load_estimator(spec), contact)
+    except (ModelFileError, ValueError) as e:
         usage_error(str(e))
 
 
@@ -163,6 +168,7 @@ def infer_cmd(
         "of fit (gof, ppc_flag); with --plots the overlay is drawn."),
     report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
     split_changes: bool = typer.Option(False, "--split-changes", help=SPLIT_HELP),
+    contact: str = typer.Option(ANY_CONTACT, "--contact", help=CONTACT_HELP),
 ) -> None:
     """Estimate <F>, U0, K and eta of every trace, with any estimator.
 
@@ -173,7 +179,7 @@ def infer_cmd(
     reason for map lines); the others are processed (exit code 1).
     """
     code = run_estimation(
-        _estimator(model), traces, out, lattice=lattice, velocity=velocity,
+        _estimator(model, contact), traces, out, lattice=lattice, velocity=velocity,
         temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
         loads=loads, plots=plots, classical=classical, check=check, report=report,
         split_changes=split_changes,
@@ -227,6 +233,7 @@ def evaluate_cmd(
     velocity: float | None = typer.Option(None, "--velocity", help=VELOCITY_HELP),
     temperature: float | None = typer.Option(None, "--temperature", help=TEMPERATURE_HELP),
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
+    contact: str = typer.Option(ANY_CONTACT, "--contact", help=CONTACT_HELP),
 ) -> None:
     """Score any estimator on any labelled set: metrics.json, predictions, plots.
 
@@ -241,7 +248,7 @@ def evaluate_cmd(
     if out.exists() and not out.is_dir():
         usage_error(f"{out}: exists and is not a folder")
     _check_conditions(lattice, velocity, temperature)
-    est = _estimator(model)
+    est = _estimator(model, contact)
     with progress_bar(inf.count_inputs(inputs), "read", "file") as bar:
         found, errors = inf.read_inputs(inputs, reading_options(calibration, None, None),
                                         progress=bar)  # fmt: skip

@@ -8,6 +8,7 @@ the ``format`` it stores.
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -15,6 +16,7 @@ from typing import Any
 
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.classical.estimator import ClassicalEstimator
+from stickslip.estimators.line.ensemble import ANY_CONTACT, CONTACTS
 from stickslip.estimators.line.estimator import LineEstimator
 from stickslip.estimators.line.modelfile import FORMAT as LINE_FORMAT
 from stickslip.estimators.line.modelfile import line_from_payload, load_line_model
@@ -67,3 +69,27 @@ def load_estimator(spec: str | os.PathLike | None = None) -> Estimator:
         raise ModelFileError(f"{name}: model format '{payload.get('format')}' is not one of "
                              f"{', '.join(KINDS)}")  # fmt: skip
     return kind(payload, name)
+
+
+def state_contact(estimator: Estimator, contact: str) -> Estimator:
+    """A copy of ``estimator`` told the contact the user states
+    (:data:`~stickslip.estimators.line.ensemble.CONTACTS`; ``"any"`` changes nothing).
+
+    Raises
+    ------
+    ValueError
+        One line: an estimator without a calibration per contact (only the line model
+        has them), or a contact its model file holds no calibration of.
+    """
+    if contact not in CONTACTS:
+        raise ValueError(f"--contact must be one of {', '.join(CONTACTS)} (got '{contact}')")
+    if contact == ANY_CONTACT:
+        return estimator
+    if not isinstance(estimator, LineEstimator):
+        raise ValueError(f"--contact {contact}: the {estimator.name} estimator has one "
+                         "calibration for any contact; the line model (the default) has one "
+                         "per stated contact")  # fmt: skip
+    estimator.ensemble.for_contact(contact)  # raises for a contact the file lacks
+    stated = copy.copy(estimator)  # the caller's estimator keeps its own setting
+    stated.contact = contact
+    return stated

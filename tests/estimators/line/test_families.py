@@ -6,6 +6,7 @@ import copy
 
 import numpy as np
 import pytest
+import torch
 
 from stickslip.estimators.line.families import (
     FamilyCalibration,
@@ -137,3 +138,41 @@ def test_contact_lines_come_in_seeded_chunks_and_join_the_calibration(monkeypatc
     assert fc["contacts"] == 3 and fc["contacts_seed"] == 77
     assert fc["n_contact_lines"] == lines.n
     assert fc["n_trajectories"] == clean.n + lines.n
+
+
+def test_an_ideal_contact_is_calibrated_on_plain_single_point_lines_only(clean, tmp_path):
+    import stickslip.estimators.line.families as fam
+    from stickslip.estimators.line.modelfile import save_line_model
+
+    # a third of the trajectories on a modulated substrate, a fifth with defects
+    n = clean.n
+    params = {**clean.params, "mod_amplitude": np.where(np.arange(n) % 3 == 0, 0.2, 0.0),
+              "defect_count": np.where(np.arange(n) % 5 == 1, 2, 0)}  # fmt: skip
+    pool = Dataset(clean.force_nN, clean.x_nm, params, {})
+    plain = fam.contact_rows("ideal", pool, n_contacts=4)
+    assert plain.size == n + 4 and not plain[n:].any()  # contact lines are not ideal
+    np.testing.assert_array_equal(plain[:n], (np.arange(n) % 3 != 0) & (np.arange(n) % 5 != 1))
+    ens = copy.deepcopy(load_line_model(None))
+    settings = FamilyCalibration(seed=12, draws=6, training_draws=6)
+    report = calibrate_on_families(ens, pool, settings)
+    # every draw of every plain trajectory, and nothing else
+    assert report["family_calibration"]["n_lines_ideal"] == plain[:n].sum() * (6 + 6)
+    any_state, ideal = ens.calibration_state(), ens.contact_calibrations["ideal"]
+    assert set(ideal) == set(any_state)
+    assert not np.array_equal(ideal["scale"], any_state["scale"])
+    stated = ens.for_contact("ideal")
+    assert stated.members is ens.members and np.array_equal(stated.scale, ideal["scale"])
+    assert ens.for_contact("any") is ens
+    with pytest.raises(ValueError, match="no calibration for the contact 'tip'"):
+        ens.for_contact("tip")
+    # the model file keeps it
+    channels = tuple(m.out_channels for m in ens.members[0].body
+                     if isinstance(m, torch.nn.Conv1d))  # fmt: skip
+    path = save_line_model(ens, tmp_path / "m.pt", channels, {}, {}, {})
+    back = load_line_model(path).contact_calibrations["ideal"]
+    for k, v in ideal.items():
+        assert (v is None and back[k] is None) or np.array_equal(v, back[k]), k
+    # too few lines for a stated contact: none fitted, the count still reported
+    few = copy.deepcopy(load_line_model(None))
+    rep = calibrate_on_families(few, pool, FamilyCalibration(seed=12, draws=1, training_draws=0))
+    assert few.contact_calibrations == {} and rep["family_calibration"]["n_lines_ideal"] > 0

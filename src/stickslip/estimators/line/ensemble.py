@@ -38,7 +38,7 @@ when the expert can be trusted; its spread head sees the expert too.
 from __future__ import annotations
 
 import copy
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import torch
@@ -377,6 +377,18 @@ def gaussian_nll(
     return (mean_term + var_term).sum(dim=1).mean()
 
 
+#: The contact a user may state (``--contact``): ``"any"``, the calibration prior's
+#: contacts (single-point and multi-asperity tips, on substrates three quarters of which
+#: are modulated or carry defects, where U0 is the substrate's mean barrier: PHYSICS.md),
+#: or ``"ideal"``, one asperity on a crystal without modulation or defects along the
+#: line (a sharp tip on a terrace), where the line shows the barrier it is asked for.
+ANY_CONTACT = "any"
+CONTACTS = (ANY_CONTACT, "ideal")
+#: The fields of :class:`LineEnsemble` that a spread calibration fits.
+CALIBRATION_STATE = ("scale", "exponent", "shape", "friction_factor", "evidence",
+                     "evidence_range")  # fmt: skip
+
+
 @dataclass
 class LineEnsemble:
     """Members, target normalisation and the calibration of their predictive spread.
@@ -416,6 +428,33 @@ class LineEnsemble:
     #: (2, len(EVIDENCE)): the calibration lines' range of ``e``, to which a line's is
     #: clipped (no extrapolation beyond what the fit saw)
     evidence_range: np.ndarray | None = None
+    #: calibrations for a contact the user states (:data:`CONTACTS`), each the
+    #: :data:`CALIBRATION_STATE` fields fitted on the calibration lines of such contacts
+    #: only; the fields above are the calibration for any contact
+    contact_calibrations: dict[str, dict[str, np.ndarray | None]] = field(
+        default_factory=dict)
+
+    def calibration_state(self) -> dict[str, np.ndarray | None]:
+        """Copies of the fields a spread calibration fits (:data:`CALIBRATION_STATE`)."""
+        return {k: None if getattr(self, k) is None else np.array(getattr(self, k), float)
+                for k in CALIBRATION_STATE}  # fmt: skip
+
+    def for_contact(self, contact: str) -> LineEnsemble:
+        """This ensemble calibrated for the stated ``contact`` (:data:`CONTACTS`): itself
+        for ``"any"``, else a copy sharing the members with that contact's calibration.
+
+        Raises
+        ------
+        ValueError
+            For a contact this model holds no calibration of.
+        """
+        if contact == ANY_CONTACT:
+            return self
+        if contact not in self.contact_calibrations:
+            held = ", ".join([ANY_CONTACT, *sorted(self.contact_calibrations)])
+            raise ValueError(f"this model holds no calibration for the contact '{contact}' "
+                             f"(it holds: {held})")  # fmt: skip
+        return replace(self, **self.contact_calibrations[contact])
 
     def evidence_factor(self, e: np.ndarray) -> np.ndarray:
         """The factor on the calibrated std of lines with evidence ``e`` (B, len(EVIDENCE)),

@@ -20,7 +20,12 @@ from stickslip.estimators.classical.estimator import (
 )
 from stickslip.estimators.domain import ETA_EDGE, EmbeddingReference
 from stickslip.estimators.evidence import EVIDENCE_COLUMNS, LOCAL_COLUMN
-from stickslip.estimators.line.ensemble import LineEnsemble, LinePrediction, predict_raw_lines
+from stickslip.estimators.line.ensemble import (
+    ANY_CONTACT,
+    LineEnsemble,
+    LinePrediction,
+    predict_raw_lines,
+)
 from stickslip.estimators.mapping import refusal
 from stickslip.estimators.table import BOUNDS, OK, TARGETS
 from stickslip.traces.trace import Trace
@@ -77,6 +82,9 @@ class LineEstimator(TraceEstimator):
     intervals = True
     name = "line-cnn"
     eta_edge = ETA_EDGE  # trained on eta >= 1.2: smooth lines land at the edge
+    #: the contact the user states (:data:`~stickslip.estimators.line.ensemble.CONTACTS`):
+    #: which of the model's calibrations sizes the intervals
+    contact = ANY_CONTACT
 
     def __init__(self, ensemble: LineEnsemble, source: str = "bundled",
                  embedding_reference: EmbeddingReference | None = None) -> None:  # fmt: skip
@@ -90,8 +98,9 @@ class LineEstimator(TraceEstimator):
             ensemble) else None  # fmt: skip
 
     def describe(self) -> str:
+        stated = "" if self.contact == ANY_CONTACT else f", stated contact: {self.contact}"
         return (f"whole-line CNN ensemble of {len(self.ensemble.members)} with calibrated "
-                f"68/95 % intervals ({self.source})")  # fmt: skip
+                f"68/95 % intervals ({self.source}{stated})")  # fmt: skip
 
     def estimate(self, traces: Sequence[Trace], conditions: Sequence[Conditions]
                  ) -> tuple[list[dict[str, Any] | str], list[str]]:  # fmt: skip
@@ -115,22 +124,23 @@ class LineEstimator(TraceEstimator):
                 np.array([conditions[i].lattice_nm for i in ok]),
                 np.array([conditions[i].velocity_nm_per_s for i in ok]),
                 np.array([conditions[i].temperature_K for i in ok]))  # fmt: skip
+        ens = self.ensemble.for_contact(self.contact)
         ref = self.embedding_reference if self.domain_verdict else None
         if ref is None:
-            pred, dist = predict_raw_lines(self.ensemble, *args[:4], temperature_K=args[4]), None
+            pred, dist = predict_raw_lines(ens, *args[:4], temperature_K=args[4]), None
             if self.domain_verdict:
                 notes.append("no embedding reference for this model: the domain verdict "
                              "reads the traces and the estimates only")  # fmt: skip
         else:
-            pred, feats = pooled_features(self.ensemble, *args)
+            pred, feats = pooled_features(ens, *args)
             dist = ref.distance(feats)
         for j, i in enumerate(ok):
             row: dict[str, Any] = {k: float(pred.values[k][j]) for k in TARGETS}
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
             for b in BOUNDS:
                 row.update({f"{k}_{b}": float(getattr(pred, b)[k][j]) for k in TARGETS})
-            if pred.F_model_std is not None and (self.ensemble.offset is not None
-                                                 or self.ensemble.compression is not None):
+            if pred.F_model_std is not None and (ens.offset is not None
+                                                 or ens.compression is not None):
                 row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])

@@ -23,6 +23,7 @@ model (:func:`family_calibration_record`), so a calibrated file says how it was 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import os
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from stickslip.estimators.line.training import (
     TYPICAL_FRACTION,
     LineTrainConfig,
     ValidationSet,
+    calibrate,
     calibrate_and_report,
     coarse_factors,
     line_targets,
@@ -113,11 +115,15 @@ class FamilyCalibration:
     coarse_fraction: float = 0.3
     contacts: int = 0
     contacts_seed: int = 5111
+    #: stated contacts (other than ``"any"``) calibrated again on their own lines
+    #: (:attr:`~stickslip.estimators.line.ensemble.LineEnsemble.contact_calibrations`)
+    stated_contacts: tuple[str, ...] = ("ideal",)
 
     def to_dict(self) -> dict:
         return {"prior": self.prior.to_dict(), "seed": self.seed, "draws": self.draws,
                 "coarse_fraction": self.coarse_fraction, "contacts": self.contacts,
                 "contacts_seed": self.contacts_seed,
+                "stated_contacts": list(self.stated_contacts),
                 "implementation": self.implementation, "training_draws": self.training_draws,
                 "families": list(self.prior.enabled()),
                 "offset": None if self.offset is None else self.offset.to_dict(),
@@ -343,4 +349,42 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
     report["family_calibration"] = {**settings.to_dict(), "n_trajectories": parts.clean.n,
                                     "n_contact_lines": parts.n_contact_lines,
                                     "clean_fingerprint": parts.clean.fingerprint()}  # fmt: skip
+    ens.contact_calibrations = {}
+    for name in settings.stated_contacts:
+        keep = contact_rows(name, clean, parts.n_contact_lines)[cs.rows]
+        report["family_calibration"][f"n_lines_{name}"] = int(keep.sum())
+        if keep.sum() < MIN_STATED_LINES:  # too few to size an interval on
+            continue
+        # a shallow copy: calibrate() rebinds the fields it fits; the members are shared
+        stated = copy.copy(ens)
+        calibrate(stated, subset_lines(cs, keep), Y[keep], ens.classes, power)
+        ens.contact_calibrations[name] = stated.calibration_state()
     return report
+
+
+#: Fewest calibration lines a stated contact's calibration is fitted on.
+MIN_STATED_LINES = 200
+
+
+def contact_rows(contact: str, clean: Dataset, n_contacts: int = 0) -> np.ndarray:
+    """Which calibration trajectories have the stated ``contact``: the pool's ``clean``
+    rows, then ``n_contacts`` multi-asperity contact lines. ``"ideal"``: a single-point
+    contact on a substrate without modulation or defects
+    (:class:`~stickslip.simulators.config.SubstrateAugmentation`)."""
+    if contact != "ideal":
+        raise ValueError(f"no calibration lines for the contact '{contact}'")
+    p = clean.params
+    plain = np.ones(clean.n, bool)
+    for key in ("mod_amplitude", "defect_count"):
+        if key in p:
+            plain &= np.asarray(p[key], float) == 0
+    return np.concatenate([plain, np.zeros(n_contacts, bool)])
+
+
+def subset_lines(cs: ValidationSet, keep: np.ndarray) -> ValidationSet:
+    """The calibration lines ``keep`` (boolean mask) of ``cs``."""
+    idx = np.flatnonzero(keep)
+    return ValidationSet(lines=[cs.lines[i] for i in idx], C=cs.C[torch.from_numpy(idx)],
+                         rows=cs.rows[idx], strata=cs.strata[idx],
+                         observed_mean=cs.observed_mean[idx],
+                         m3_nN=None if cs.m3_nN is None else cs.m3_nN[idx])  # fmt: skip

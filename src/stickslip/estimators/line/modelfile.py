@@ -45,6 +45,7 @@ import torch
 from stickslip._version import __version__
 from stickslip.atomic import atomic_path
 from stickslip.estimators.line.ensemble import (
+    CALIBRATION_STATE,
     TARGETS,
     LineCNN,
     LineEnsemble,
@@ -88,6 +89,11 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
     for key in ("exponent", "shape", "friction_factor", "evidence", "evidence_range"):
         if getattr(ens, key) is not None:
             payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
+    if ens.contact_calibrations:
+        payload["contact_calibrations"] = {
+            name: {k: torch.as_tensor(np.asarray(v, np.float64)) for k, v in state.items()
+                   if v is not None}
+            for name, state in ens.contact_calibrations.items()}  # fmt: skip
     if ens.classes is not None:
         payload["spread_classes"] = _plain(ens.classes.to_dict())
     if ens.offset is not None:
@@ -146,6 +152,9 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
                     if "offset_prior" in payload else None),  # fmt: skip
             compression=(CompressionPrior.from_dict(payload["compression_prior"])
                          if "compression_prior" in payload else None),  # fmt: skip
+            contact_calibrations={
+                name: {k: state[k].numpy() if k in state else None for k in CALIBRATION_STATE}
+                for name, state in payload.get("contact_calibrations", {}).items()},
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
