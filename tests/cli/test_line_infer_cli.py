@@ -79,6 +79,9 @@ def test_a_stated_ideal_contact_narrows_u0_where_the_examples_are_quiet(tmp_path
         res = runner.invoke(app, ["infer", ex, "--out", str(out), "--contact", contact])
         assert res.exit_code == 0, res.output
     assert "stated contact: ideal" in res.stderr
+    # the table says which calibration sized its intervals
+    assert {r.get("contact") for r in csv.DictReader(open(tmp_path / "ideal.csv"))} == {"ideal"}
+    assert not any(r.get("contact") for r in csv.DictReader(open(tmp_path / "any.csv")))
     any_, ideal = _half_widths(tmp_path / "any.csv"), _half_widths(tmp_path / "ideal.csv")
     assert set(any_) == set(ideal) and len(any_) == 6
     # the bundled calibration for one asperity on a plain crystal: narrower in every

@@ -144,6 +144,8 @@ class LineEstimator(TraceEstimator):
                 row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
+            if self.contact != ANY_CONTACT:  # which calibration sized the intervals
+                row["contact"] = self.contact
             row.update(zip(EVIDENCE_COLUMNS, map(float, pred.evidence[j]), strict=True))
             if pred.local_evidence is not None:
                 row[LOCAL_COLUMN] = float(pred.local_evidence[j])
