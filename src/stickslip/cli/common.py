@@ -90,6 +90,20 @@ def check_output_file(option: str, path: Path) -> None:
         usage_error(f"{option} {path}: cannot write in the folder {folder}")
 
 
+def check_table_path(option: str, path: Path) -> None:
+    """A usage error, before any work, unless ``path`` names a result table this tool
+    writes (its suffix: :func:`~stickslip.estimators.table.table_format`) where it can
+    write it (:func:`check_output_file`)."""
+    # imported here: every command imports this module, few write a table
+    from stickslip.estimators.table import TableFormatError, table_format
+
+    try:
+        table_format(path)
+    except TableFormatError as e:
+        usage_error(str(e))
+    check_output_file(option, path)
+
+
 def check_plot_path(option: str, path: Path) -> None:
     """A usage error, before any work, unless ``path`` names an image file this tool
     writes (:data:`PLOT_SUFFIXES`) where it can write it (:func:`check_output_file`)."""

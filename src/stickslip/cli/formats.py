@@ -17,6 +17,7 @@ from stickslip.cli.common import (
     LPL_HELP,
     check_output_file,
     check_plot_path,
+    check_table_path,
     echo,
     error,
     info,
@@ -158,7 +159,7 @@ def friction_load_cmd(
     In a folder, force curves and files without a load are skipped with a note.
     """
     from stickslip.diagnostics import load_fits as lf
-    from stickslip.estimators.table import ResultTable, TableFormatError, table_format
+    from stickslip.estimators.table import ResultTable
 
     check_plot_path("--out", out)
     if csv_out is not None:
@@ -167,11 +168,7 @@ def friction_load_cmd(
     opts = reading_options(calibration, lines_per_load, load_list if lines_per_load else None,
                            None, load_unit)
     if fits is not None:
-        try:
-            table_format(fits)
-        except TableFormatError as e:
-            usage_error(str(e))
-        check_output_file("--fits", fits)
+        check_table_path("--fits", fits)
     failed = 0
     est_summary = None
     if estimates is not None:

@@ -19,6 +19,7 @@ from stickslip.cli.common import (
     LOADS_HELP,
     LPL_HELP,
     check_output_file,
+    check_table_path,
     echo,
     error,
     info,
@@ -34,7 +35,7 @@ from stickslip.estimators.line.ensemble import ANY_CONTACT
 from stickslip.estimators.line.streaming import StreamSettings
 from stickslip.estimators.line.training import LineTrainConfig, family_settings
 from stickslip.estimators.load import load_estimator, state_contact
-from stickslip.estimators.table import TableFormatError, has_estimate, table_format
+from stickslip.estimators.table import has_estimate
 from stickslip.estimators.window.features import FeatureError
 from stickslip.estimators.window.modelfile import ModelFileError
 from stickslip.estimators.window.training import TrainConfig
@@ -65,15 +66,6 @@ def _estimator(spec: str | None, contact: str = ANY_CONTACT) -> Estimator:
         usage_error(str(e))
 
 
-def _check_out(out: Path) -> None:
-    """Refuse an output path that cannot take a table, before any work."""
-    try:
-        table_format(out)
-    except TableFormatError as e:
-        usage_error(str(e))
-    check_output_file("--out", out)
-
-
 def _check_conditions(lattice: float | None, velocity: float | None,
                       temperature: float | None) -> None:  # fmt: skip
     why = check_values(lattice, velocity, temperature)
@@ -89,7 +81,7 @@ def run_estimation(
     split_changes: bool = False,
 ) -> int:  # fmt: skip
     """The shared body of ``infer``, ``label`` and ``demo``; returns the exit code."""
-    _check_out(out)
+    check_table_path("--out", out)
     if report is not None:
         if report.suffix.lower() not in (".html", ".htm"):
             usage_error(f"--report {report}: the report is an .html file")

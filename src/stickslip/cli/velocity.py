@@ -12,8 +12,8 @@ from stickslip.cli.common import (
     CALIBRATION_HELP,
     EXIT_FAILED_INPUT,
     EXIT_OK,
-    check_output_file,
     check_plot_path,
+    check_table_path,
     echo,
     error,
     info,
@@ -72,7 +72,6 @@ def friction_velocity_cmd(
     against the simulator at the lines' median U0 and K. Prints the results; exit code 1
     if any input could not be used (the others are still processed), 2 for a usage error.
     """
-    from stickslip.estimators.table import TableFormatError, table_format
     from stickslip.jobs.velocity import run_friction_velocity, write_outputs
 
     if not lattice > 0:
@@ -81,11 +80,7 @@ def friction_velocity_cmd(
         usage_error(f"--temperature must be > 0 K for a thermal law (got {temperature:g})")
     if not 1 <= check_lines <= 1024:
         usage_error(f"--check-lines must be between 1 and 1024 (got {check_lines})")
-    try:
-        table_format(out)
-    except TableFormatError as e:
-        usage_error(str(e))
-    check_output_file("--out", out)
+    check_table_path("--out", out)
     check_plot_path("--plot", plot)
     opts = reading_options(calibration, None, None)
     if check:
