@@ -61,6 +61,11 @@ def is_readable_suffix(path: Path) -> bool:
     return s in READERS or s in SCAN_READERS
 
 
+def readable_suffixes() -> str:
+    """The suffixes a reader is registered for, as a user reads them."""
+    return f"{', '.join(sorted({*READERS, *SCAN_READERS}))}, Bruker's .000-.999"
+
+
 def is_dataset_dir(path: str | os.PathLike) -> bool:
     """True for a folder that is one dataset (a ``.zarr`` store), not a folder of traces."""
     p = Path(path)
@@ -88,9 +93,8 @@ def _existing(path: str | os.PathLike) -> Path:
     if not p.exists():
         raise TraceReadError(p, "file not found")
     if not is_readable_suffix(p):
-        known = ", ".join(sorted({*READERS, *SCAN_READERS}))
         raise TraceReadError(p, f"unknown file format '{p.suffix or p.name}' (readable: "
-                                f"{known}, Bruker's .000-.999)")  # fmt: skip
+                                f"{readable_suffixes()})")  # fmt: skip
     if p.is_dir() and not is_dataset_dir(p):
         raise TraceReadError(p, "is a directory")
     return p
@@ -166,8 +170,7 @@ def expand_paths(paths: Iterable[str | os.PathLike]) -> tuple[list[Path], list[T
                            if (q.is_file() or is_dataset_dir(q)) and is_readable_suffix(q))
             if not found:
                 errors.append(TraceReadError(p, "the folder holds no file of a readable "
-                                                "format (.csv, .spm, .gwy, ... see 'What it "
-                                                "reads' in the README)"))  # fmt: skip
+                                                f"format ({readable_suffixes()})"))  # fmt: skip
             out.extend(found)
         else:
             out.append(p)
