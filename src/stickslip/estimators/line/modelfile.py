@@ -67,6 +67,19 @@ FORMAT = "stickslip-line-model-1"
 BUNDLED = "line_model.pt"
 
 
+def _state_payload(state: dict[str, np.ndarray | None]) -> dict[str, torch.Tensor]:
+    """A spread calibration's fields as stored (:data:`CALIBRATION_STATE`); one left
+    out is absent: a plain scale, Gaussian intervals, no factor on the <F> model part."""
+    return {k: torch.as_tensor(np.asarray(v, np.float64)) for k, v in state.items()
+            if v is not None}  # fmt: skip
+
+
+def _state_from(stored: dict[str, Any]) -> dict[str, np.ndarray | None]:
+    """The fields :func:`_state_payload` stored (``scale`` required: KeyError)."""
+    return {k: stored[k].numpy() if k in stored or k == "scale" else None
+            for k in CALIBRATION_STATE}  # fmt: skip
+
+
 def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[int, ...],
                     train_config: dict, dataset: dict, metrics: dict) -> Path:  # fmt: skip
     """Write the ensemble and its provenance atomically; returns the path."""
@@ -79,21 +92,15 @@ def save_line_model(ens: LineEnsemble, path: str | os.PathLike, channels: tuple[
                     for m in ens.members],  # fmt: skip
         "y_mean": torch.as_tensor(np.asarray(ens.y_mean, np.float64)),
         "y_std": torch.as_tensor(np.asarray(ens.y_std, np.float64)),
-        "scale": torch.as_tensor(np.asarray(ens.scale, np.float64)),
+        **_state_payload(ens.calibration_state()),
         "train_config": _plain(train_config),
         "dataset": _plain(dataset),
         "metrics": _plain(metrics),
     }
     payload["spread_hidden"] = ens.members[0].spread_hidden
-    # absent: a plain scale, Gaussian intervals, no factor on the <F> model part
-    for key in ("exponent", "shape", "friction_factor", "evidence", "evidence_range"):
-        if getattr(ens, key) is not None:
-            payload[key] = torch.as_tensor(np.asarray(getattr(ens, key), np.float64))
     if ens.contact_calibrations:
-        payload["contact_calibrations"] = {
-            name: {k: torch.as_tensor(np.asarray(v, np.float64)) for k, v in state.items()
-                   if v is not None}
-            for name, state in ens.contact_calibrations.items()}  # fmt: skip
+        payload["contact_calibrations"] = {name: _state_payload(state) for name, state
+                                           in ens.contact_calibrations.items()}  # fmt: skip
     if ens.classes is not None:
         payload["spread_classes"] = _plain(ens.classes.to_dict())
     if ens.offset is not None:
@@ -138,23 +145,15 @@ def line_from_payload(payload: Any, name: str) -> LineEnsemble:
             spec=spec,
             y_mean=payload["y_mean"].numpy(),
             y_std=payload["y_std"].numpy(),
-            scale=payload["scale"].numpy(),
             expert=expert,
             classes=classes,
-            exponent=payload["exponent"].numpy() if "exponent" in payload else None,
-            shape=payload["shape"].numpy() if "shape" in payload else None,
-            friction_factor=(payload["friction_factor"].numpy()
-                             if "friction_factor" in payload else None),  # fmt: skip
-            evidence=payload["evidence"].numpy() if "evidence" in payload else None,
-            evidence_range=(payload["evidence_range"].numpy()
-                            if "evidence_range" in payload else None),  # fmt: skip
+            **_state_from(payload),
             offset=(OffsetPrior.from_dict(payload["offset_prior"])
                     if "offset_prior" in payload else None),  # fmt: skip
             compression=(CompressionPrior.from_dict(payload["compression_prior"])
                          if "compression_prior" in payload else None),  # fmt: skip
-            contact_calibrations={
-                name: {k: state[k].numpy() if k in state else None for k in CALIBRATION_STATE}
-                for name, state in payload.get("contact_calibrations", {}).items()},
+            contact_calibrations={name: _state_from(state) for name, state
+                                  in payload.get("contact_calibrations", {}).items()},
         )
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
