@@ -211,12 +211,17 @@ def volt_scale_to_V(unit: str) -> float | None:
     return _VOLT_TO_V.get(unit.strip())
 
 
+def length_scale_to_nm(unit: str) -> float | None:
+    """Factor from ``unit`` to nm, or ``None`` if ``unit`` is not a length unit."""
+    return _LENGTH_TO_NM.get(unit.strip())
+
+
 def length_to_nm(value: float, unit: str) -> float:
     """Convert a length to nm; raises ValueError for an unknown unit."""
-    try:
-        return float(value) * _LENGTH_TO_NM[unit.strip()]
-    except KeyError:
-        raise ValueError(f"unknown length unit '{unit}'") from None
+    scale = length_scale_to_nm(unit)
+    if scale is None:
+        raise ValueError(f"unknown length unit '{unit}'")
+    return float(value) * scale
 
 
 def optional_import(module: str, path: Path, extra: str = "formats") -> ModuleType:

@@ -41,7 +41,7 @@ from stickslip.traces.formats.common import (
     Channel,
     ScanFile,
     force_scale_to_nN,
-    length_to_nm,
+    length_scale_to_nm,
     read_bytes,
     volt_scale_to_V,
 )
@@ -61,18 +61,10 @@ def _unit_columns(header: Sequence[str], prefix: str, bare: bool = False) -> tup
         name, _, unit = h.partition("_")
         if name != prefix or (not unit and not bare):
             continue
-        if not unit or (prefix == "x" and _is_length(unit)) or (
+        if not unit or (prefix == "x" and length_scale_to_nm(unit)) or (
                 prefix != "x" and (force_scale_to_nN(unit) or volt_scale_to_V(unit))):  # fmt: skip
             found.append(h)
     return tuple(found)
-
-
-def _is_length(unit: str) -> bool:
-    try:
-        length_to_nm(1.0, unit)
-    except ValueError:
-        return False
-    return True
 
 
 _SEPARATORS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
@@ -205,7 +197,7 @@ def traces_from_columns(
     tcol = _one(header, _unit_columns(header, "trace", bare=True), path, "trace")
     rcol = _one(header, _unit_columns(header, "retrace", bare=True), path, "retrace")
     col = {h: data[:, i] for i, h in enumerate(header)}
-    x = col[xcol] * length_to_nm(1.0, _unit_of(xcol)) if xcol else None
+    x = col[xcol] * length_scale_to_nm(_unit_of(xcol)) if xcol else None
     if fcol and (tcol or rcol):
         raise TraceReadError(path, "ambiguous layout: both force and trace/retrace columns")
     if tcol and rcol:
