@@ -35,6 +35,7 @@ import numpy as np
 import torch
 from _machine import machine_line
 
+from stickslip.diagnostics.metrics import interval_score
 from stickslip.estimators.line.ensemble import predict_std_lines
 from stickslip.estimators.line.families import (
     FamilyCalibration,
@@ -57,7 +58,7 @@ CAL_N, CAL_SEED, CONTACTS = 600, 501, 640
 
 def _scores(err: np.ndarray, half: np.ndarray) -> str:
     """Coverage, median half-width and mean interval score (alpha 0.05), log units."""
-    score = 2 * half + (2 / 0.05) * np.maximum(np.abs(err) - half, 0.0)
+    score = interval_score(err, -half, half, 0.05)
     return (f"coverage {np.mean(np.abs(err) <= half):.3f}, half-width {np.median(half):.3f}, "
             f"interval score {np.mean(score):.3f} ({err.size} lines)")
 

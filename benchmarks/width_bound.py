@@ -46,6 +46,7 @@ from _machine import machine_line
 from scipy.stats import rankdata
 from torch import nn
 
+from stickslip.diagnostics.metrics import interval_score
 from stickslip.estimators.line.ensemble import predict_std_lines
 from stickslip.estimators.line.families import (
     FamilyCalibration,
@@ -63,11 +64,6 @@ CAL_N, CAL_SEED, CONTACTS = 600, 501, 640
 TARGETS = {"U0": 1, "K": 2}  # columns of the mapped-frame targets (ln U0', ln K')
 LENGTH = 480  # pixels the CNN reads (mapped lines are 374-535 long; shorter ones wrap)
 ALPHA = 0.05
-
-
-def interval_score(err_abs: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """Per-line interval score of the central 95 % interval ``+-half`` (log units)."""
-    return 2 * half + (2 / ALPHA) * np.maximum(err_abs - half, 0.0)
 
 
 class Sizer(nn.Module):
@@ -241,7 +237,8 @@ def main() -> None:
             print(f"  {gname} ({int(m.sum())} lines; 95 % quantile of |error| {q95:.3f})")
             for name, half in halves.items():
                 h = half[m, k]
-                print(f"    {name:13s} score {np.mean(interval_score(a[m, k], h)):.3f}, coverage "
+                score = np.mean(interval_score(a[m, k], -h, h, ALPHA))
+                print(f"    {name:13s} score {score:.3f}, coverage "
                       f"{np.mean(a[m, k] <= h):.3f}, half-width {np.median(h):.3f}")  # fmt: skip
 
     t1 = time.perf_counter()
