@@ -2,9 +2,9 @@
 
 Generates ``--n`` files (default 10,000) from a fixed seed across the formats the
 package reads: plain CSV, European CSV (``;`` with decimal commas), headerless and
-tab-separated text, ``.npy``, HDF5, Gwyddion, NT-MDT, Nanosurf NID, JPK (TIFF), Asylum
-IBW, and Bruker NanoScope (the real files of ../shared/data when they are there). Each
-is a seed file mutated one way: random bytes, cut short, bytes overwritten, bytes
+tab-separated text, ``.npy``, HDF5, MATLAB ``.mat``, Gwyddion, NT-MDT, Nanosurf NID, JPK
+(TIFF), Asylum IBW, and Bruker NanoScope (the real files of ../shared/data when they are
+there). Each is a seed file mutated one way: random bytes, cut short, bytes overwritten, bytes
 inserted, or (text) values replaced by extreme ones (1e30, NaN, ``abc``, an empty
 cell), a column scaled by orders of magnitude, lines dropped or repeated.
 
@@ -104,6 +104,15 @@ def _h5() -> bytes:
         return p.read_bytes()
 
 
+def _mat() -> bytes:
+    from scipy.io import savemat
+
+    x, F = _sawtooth()
+    buf = io.BytesIO()
+    savemat(buf, {"x_nm": x, "force_nN": F})
+    return buf.getvalue()
+
+
 def _gwy() -> bytes | None:
     try:
         from gwyfile import objects
@@ -192,6 +201,7 @@ def seeds() -> dict[str, bytes]:
         "loop.txt": _loop_txt(),
         "seed.npy": _npy(),
         "seed.h5": _h5(),
+        "seed.mat": _mat(),
         "seed.gwy": _gwy(),
         "seed.mdt": _mdt(),
         "seed.nid": _nid(),

@@ -148,3 +148,23 @@ def test_warnings_become_status_lines_under_verbose(tmp_path, monkeypatch, flag,
     if shown:
         assert lines[0].startswith("warning: RuntimeWarning: overflow encountered in exp (")
     assert "Traceback" not in res.output
+
+
+def test_a_matlab_recording_against_time_is_labelled_with_its_speed(tmp_path):
+    """A .mat file of a time axis and a force: --velocity turns t into x = v t (the
+    line's own speed), and without it the file is refused with that advice."""
+    from scipy.io import savemat
+
+    s = PhysicalSettings()
+    r = simulate([2.0], [20.0], s, seed=5)
+    p = tmp_path / "line.mat"
+    savemat(p, {"t_ms": r.x_nm / s.velocity_nm_per_s * 1e3, "force_nN": r.force_nN[0]})
+    out = tmp_path / "labels.csv"
+    r1 = runner.invoke(app, ["label", str(p), "--out", str(out)])
+    assert r1.exit_code == 1 and "--velocity" in r1.output
+    r2 = runner.invoke(app, ["label", str(p), "--velocity", str(s.velocity_nm_per_s),
+                             "--out", str(out)])  # fmt: skip
+    assert r2.exit_code == 0, r2.output
+    (row,) = _rows(out)
+    assert row["quality"] == "ok" and float(row["U0_eV"]) == pytest.approx(2.0, rel=0.08)
+    assert float(row["K_N_m"]) == pytest.approx(20.0, rel=0.08)

@@ -27,7 +27,8 @@ from stickslip.traces import Trace, TraceReadError, collect_traces
 ROOT = Path(__file__).resolve().parents[2]
 RAMP = ROOT.parent / "shared" / "data" / "bruker-friction-ramp"
 
-SUFFIXES = [".spm", ".000", ".nid", ".ibw", ".gwy", ".mdt", ".jpk", ".csv", ".txt", ".npy", ".h5"]
+SUFFIXES = [".spm", ".000", ".nid", ".ibw", ".gwy", ".mdt", ".jpk", ".csv", ".txt", ".npy", ".h5",
+            ".mat"]
 N_FAST = 1200  # inputs of the default run (~20 s on 2 cores); the full run: -m slow
 
 

@@ -411,3 +411,15 @@ def test_garbage_under_known_suffix_is_a_clean_error(tmp_path, suffix):
     with pytest.raises(TraceReadError) as e:
         read_file(p)
     assert "\n" not in str(e.value) and str(p) in str(e.value)
+
+
+def test_a_csv_against_time_reads_with_the_speed(tmp_path):
+    p = _write(tmp_path / "timed.csv", "time_ms,force_nN\n" + "".join(
+        f"{10 + 0.5 * i},{np.sin(i / 5):.6f}\n" for i in range(N)))  # fmt: skip
+    with pytest.raises(TraceReadError, match="time axis"):
+        read_file(p)
+    (t,) = read_file(p, **reader_options(velocity_nm_per_s=20.0))
+    assert np.allclose(t.x_nm, np.arange(N) * 0.5e-3 * 20.0)
+    assert t.meta["velocity_nm_per_s"] == 20.0
+    with pytest.raises(ValueError, match="velocity"):
+        reader_options(velocity_nm_per_s=-1.0)

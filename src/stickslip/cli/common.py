@@ -153,7 +153,8 @@ def is_interactive() -> bool:
 
 # Reading options shared by every command that reads vendor maps.
 CALIBRATION_HELP = ("Lateral calibration in nN/V, for force channels in volts (wins over a "
-                    "calibration stored in the file).")
+                    "calibration stored in the file); for a MATLAB signal without a unit, "
+                    "its nN per unit.")
 LPL_HELP = "Consecutive scan lines recorded at one load (groups lines by load)."
 LOADS_HELP = "Comma-separated loads/setpoints of the line groups (with --lines-per-load)."
 
@@ -174,13 +175,14 @@ def reading_options(
     loads: list[float] | None,
     scan_size_nm: float | None = None,
     load_unit: str = "nN",
+    velocity_nm_per_s: float | None = None,
 ) -> dict[str, Any]:
     """Reader ``**options`` for :func:`stickslip.traces.collect_traces`, or a usage error."""
     from stickslip.traces.formats.maps import reader_options
 
     try:
-        return reader_options(
-            calibration, lines_per_load, loads, load_unit=load_unit, scan_size_nm=scan_size_nm
-        )
+        return reader_options(calibration, lines_per_load, loads, load_unit=load_unit,
+                              scan_size_nm=scan_size_nm,
+                              velocity_nm_per_s=velocity_nm_per_s)  # fmt: skip
     except ValueError as e:
         usage_error(str(e))

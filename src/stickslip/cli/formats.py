@@ -101,9 +101,13 @@ def inspect_cmd(
     scan_size_nm: float | None = typer.Option(
         None, "--scan-size-nm", help="Line length for files that do not state it."
     ),
+    velocity: float | None = typer.Option(
+        None, "--velocity", help="Support speed in nm/s, for a recording against time."
+    ),
 ) -> None:
     """Show channels, scan size, rate, setpoint and the traces a file would give."""
-    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads), scan_size_nm)
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads), scan_size_nm,
+                           velocity_nm_per_s=velocity)  # fmt: skip
     paths, bad = expand_paths(files)
     for e in bad:
         error(str(e))

@@ -48,7 +48,8 @@ MODEL_HELP = ("Estimator: a model file from 'stickslip train' (any kind), 'class
               "'window' (the bundled paper MLP); default: the bundled whole-line model.")
 OUT_HELP = "Result table; the format follows the extension: .csv, .json or .parquet."
 LATTICE_HELP = "Lattice spacing a in nm (wins over the file's; default: the estimator's, 0.246)."
-VELOCITY_HELP = "Scan velocity in nm/s (wins over the file's; default: the estimator's, 60)."
+VELOCITY_HELP = ("Scan velocity in nm/s (wins over the file's; default: the estimator's, 60); "
+                 "also turns a recording's time axis into positions, x = v t.")
 SPLIT_HELP = ("Where the verdict finds a trace changing part-way (a tip change, "
               "change_nm), estimate each part on its own too (one more row each).")
 REPORT_HELP = "Also write one self-contained HTML report of the run (opens offline)."
@@ -89,7 +90,8 @@ def run_estimation(
     if plots is not None and plots.exists() and not plots.is_dir():
         usage_error(f"--plots {plots} is a file; it names a folder for the panels")
     _check_conditions(lattice, velocity, temperature)
-    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads))
+    opts = reading_options(calibration, lines_per_load, parse_loads_arg(loads),
+                           velocity_nm_per_s=velocity)  # fmt: skip
     if examples:
         found, errors = load_examples()[0], []
     else:
@@ -242,8 +244,8 @@ def evaluate_cmd(
     _check_conditions(lattice, velocity, temperature)
     est = _estimator(model, contact)
     with progress_bar(inf.count_inputs(inputs), "read", "file") as bar:
-        found, errors = inf.read_inputs(inputs, reading_options(calibration, None, None),
-                                        progress=bar)  # fmt: skip
+        opts = reading_options(calibration, None, None, velocity_nm_per_s=velocity)
+        found, errors = inf.read_inputs(inputs, opts, progress=bar)
     result = inf.infer(est, found, errors, lattice_nm=lattice, velocity_nm_per_s=velocity,
                        temperature_K=temperature, classical=False)  # fmt: skip
     for line in result.error_lines():

@@ -22,6 +22,7 @@ from stickslip.traces.formats.gwyddion import read_gwy
 from stickslip.traces.formats.hdf5 import read_h5
 from stickslip.traces.formats.jpk import read_jpk
 from stickslip.traces.formats.maps import apply_load_schedule, map_to_traces
+from stickslip.traces.formats.matlab import read_mat
 from stickslip.traces.formats.mdt import read_mdt
 from stickslip.traces.formats.nanosurf import read_nid
 from stickslip.traces.formats.text import read_npy, read_text
@@ -43,6 +44,7 @@ READERS: dict[str, Reader] = {
     ".csv": read_text,
     ".txt": read_text,
     ".npy": read_npy,
+    ".mat": read_mat,
     ".h5": read_h5,
     ".hdf5": read_h5,
     ".zarr": read_zarr,  # a folder: a Zarr store is one dataset, never expanded

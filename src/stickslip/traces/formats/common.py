@@ -36,6 +36,7 @@ _TRACE_WORDS = re.compile(r"trace|forward|\bfwd\b", re.IGNORECASE)
 # Scale factors of the force units to nN and of the voltage units to V.
 _FORCE_TO_NN = {"N": 1e9, "mN": 1e6, "uN": 1e3, "µN": 1e3, "nN": 1.0, "pN": 1e-3}
 _VOLT_TO_V = {"V": 1.0, "mV": 1e-3, "uV": 1e-6, "µV": 1e-6}
+_TIME_TO_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 _LENGTH_TO_NM = {"m": 1e9, "mm": 1e6, "um": 1e3, "µm": 1e3, "~m": 1e3, "nm": 1.0, "pm": 1e-3,
                  "Å": 0.1, "A": 0.1}
 
@@ -216,6 +217,11 @@ def length_scale_to_nm(unit: str) -> float | None:
     return _LENGTH_TO_NM.get(unit.strip())
 
 
+def time_scale_to_s(unit: str) -> float | None:
+    """Factor from ``unit`` to s, or ``None`` if ``unit`` is not a time unit."""
+    return _TIME_TO_S.get(unit.strip())
+
+
 def length_to_nm(value: float, unit: str) -> float:
     """Convert a length to nm; raises ValueError for an unknown unit."""
     scale = length_scale_to_nm(unit)
@@ -240,11 +246,11 @@ def optional_import(module: str, path: Path, extra: str = "formats") -> ModuleTy
 FORMAT_NAMES = {".spm": "Bruker NanoScope", ".nid": "Nanosurf NID", ".ibw": "Asylum/Igor IBW",
                 ".gwy": "Gwyddion", ".mdt": "NT-MDT", ".jpk": "JPK image", ".csv": "CSV",
                 ".txt": "text", ".npy": "NumPy .npy", ".h5": "HDF5", ".hdf5": "HDF5",
-                ".zarr": "Zarr"}  # fmt: skip
+                ".zarr": "Zarr", ".mat": "MATLAB .mat"}  # fmt: skip
 _RE_EXPORT = "re-export it from the instrument software (or open it there to check it)"
 _WRITE_AGAIN = "write or export it again (a copy may have been cut short)"
 #: Formats the project or a script writes (not an instrument): advice to write them again.
-_WRITTEN = {".csv", ".txt", ".npy", ".h5", ".hdf5", ".zarr"}
+_WRITTEN = {".csv", ".txt", ".npy", ".h5", ".hdf5", ".zarr", ".mat"}
 
 
 def damage_reason(error: BaseException, path: Path) -> str:

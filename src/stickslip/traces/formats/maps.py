@@ -85,6 +85,7 @@ def reader_options(
     load_unit: str = "nN",
     scan_size_nm: float | None = None,
     directions: Sequence[str] | None = None,
+    velocity_nm_per_s: float | None = None,
 ) -> dict[str, Any]:
     """Validate command-line reading options and return them as reader ``**options``.
 
@@ -102,6 +103,9 @@ def reader_options(
         Scan-line length for files that do not state it.
     directions : sequence of str, optional
         Subset of ``("trace", "retrace", "loop")`` to emit per line.
+    velocity_nm_per_s : float, optional
+        The support's speed, which turns a recording's time axis into positions
+        (``x = v t``; :func:`stickslip.traces.formats.text.traces_from_columns`).
 
     Returns
     -------
@@ -138,6 +142,10 @@ def reader_options(
         if bad or not directions:
             raise ValueError(f"directions must be among {', '.join(DIRECTIONS)}")
         opts["directions"] = tuple(directions)
+    if velocity_nm_per_s is not None:
+        if not (math.isfinite(velocity_nm_per_s) and velocity_nm_per_s > 0):
+            raise ValueError("velocity must be a positive number of nm/s")
+        opts["velocity_nm_per_s"] = float(velocity_nm_per_s)
     return opts
 
 

@@ -7,6 +7,10 @@ whitespace separated; ``#`` lines are comments):
   the name after ``_``: any length unit for ``x`` (``x_pm``, ``x_A``, ``x_um``, ``x_mm``,
   ``x_m``) and any force unit for the force (``force_pN``, ``force_uN``, ``force_N``)
   are converted to nm and nN.
+- ``t_s,force_nN`` (or ``t``, ``time``, ``time_ms``, ...; bare: seconds): one trace
+  recorded against time, as macroscopic rigs log it; with the support's speed
+  (``velocity_nm_per_s``, ``--velocity``) the positions are ``x = v (t - t_0)``. Without
+  it the file is refused: time alone does not give the stick slope in N/m.
 - ``x_nm,force_V`` (or ``force_mV``): one trace in volts; converted with
   ``calibration_nN_per_V``, else kept in volts and flagged (``meta["unit"] == "V"``,
   ``calibrated=False``).
@@ -43,13 +47,15 @@ from stickslip.traces.formats.common import (
     force_scale_to_nN,
     length_scale_to_nm,
     read_bytes,
+    time_scale_to_s,
     volt_scale_to_V,
 )
 from stickslip.traces.formats.maps import map_to_traces, to_force
 from stickslip.traces.trace import READ_NOTE, Trace, TraceReadError, validate_trace
 
-NEEDED = ("needs columns x_nm,force_nN (any length unit for x: pm, A, nm, um, mm, m; any force "
-          "or voltage unit for the force: pN, nN, uN, mN, N, V, mV), or trace,retrace")
+NEEDED = ("needs columns x_nm,force_nN (any length unit for x: pm, A, nm, um, mm, m, or a time "
+          "axis t_s with --velocity; any force or voltage unit for the force: pN, nN, uN, mN, "
+          "N, V, mV), or trace,retrace")
 FORMAT_LOOP = "friction loop (text)"
 
 
@@ -62,9 +68,23 @@ def _unit_columns(header: Sequence[str], prefix: str, bare: bool = False) -> tup
         if name != prefix or (not unit and not bare):
             continue
         if not unit or (prefix == "x" and length_scale_to_nm(unit)) or (
-                prefix != "x" and (force_scale_to_nN(unit) or volt_scale_to_V(unit))):  # fmt: skip
+                prefix in ("t", "time") and time_scale_to_s(unit)) or (
+                prefix not in ("x", "t", "time") and (force_scale_to_nN(unit)
+                                                      or volt_scale_to_V(unit))):  # fmt: skip
             found.append(h)
     return tuple(found)
+
+
+def _time_positions(path: Path, name: str, t: np.ndarray, options: dict[str, Any]
+                    ) -> np.ndarray:  # fmt: skip
+    """Positions ``x = v (t - t_0)`` (nm) of a time axis ``name`` with the support's speed
+    from ``options``; a one-line refusal without it."""
+    v = options.get("velocity_nm_per_s")
+    if v is None:
+        raise TraceReadError(path, f"the positions are a time axis ('{name}'): pass the "
+                             "support's speed with --velocity (nm/s) to read them as x = v t")
+    unit = name.partition("_")[2] or "s"
+    return (t - t[0]) * time_scale_to_s(unit) * v
 
 
 _SEPARATORS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
@@ -193,21 +213,28 @@ def traces_from_columns(
     """
     header = [h.strip() for h in header]
     xcol = _one(header, _unit_columns(header, "x"), path, "position")
+    tcol_time = None if xcol else _one(header, _unit_columns(header, "t", bare=True)
+                                       + _unit_columns(header, "time", bare=True), path, "time")
     fcol = _one(header, _unit_columns(header, "force"), path, "force")
     tcol = _one(header, _unit_columns(header, "trace", bare=True), path, "trace")
     rcol = _one(header, _unit_columns(header, "retrace", bare=True), path, "retrace")
     col = {h: data[:, i] for i, h in enumerate(header)}
     x = col[xcol] * length_scale_to_nm(_unit_of(xcol)) if xcol else None
+    if tcol_time is not None:
+        x = _time_positions(path, tcol_time, col[tcol_time], options)
     if fcol and (tcol or rcol):
         raise TraceReadError(path, "ambiguous layout: both force and trace/retrace columns")
     if tcol and rcol:
         if _unit_of(tcol) != _unit_of(rcol):
             raise TraceReadError(path, f"mixed units: {tcol} and {rcol}")
         return _loop_traces(path, col[tcol], col[rcol], _unit_of(tcol), x, **options)
-    if fcol and (xcol or len(header) == 1):
-        pixels = xcol is None and not options.get("scan_size_nm")
+    if fcol and (x is not None or len(header) == 1):
+        pixels = x is None and not options.get("scan_size_nm")
         x = _positions(data.shape[0], options) if x is None else x
-        return [_single_trace(path, x, col[fcol], _unit_of(fcol), options, pixels)]
+        trace = _single_trace(path, x, col[fcol], _unit_of(fcol), options, pixels)
+        if tcol_time is not None:  # the speed that made the positions is the line's
+            trace.meta["velocity_nm_per_s"] = options["velocity_nm_per_s"]
+        return [trace]
     raise TraceReadError(path, f"{NEEDED} (found {','.join(header)})")
 
 
@@ -266,6 +293,10 @@ def read_npy(path: Path, **options: Any) -> list[Trace]:
             # file again is not the user's concern here
             warnings.filterwarnings("ignore", message="Reading `.npy` or `.npz` file required",
                                     category=UserWarning)  # fmt: skip
+            # numpy parses the header as a Python literal: a damaged one can warn of an
+            # escape sequence before it fails (or reads), which the user has no use for
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", SyntaxWarning)
             arr = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as e:
         raise TraceReadError(path, f"damaged .npy file ({e})") from None
