@@ -22,6 +22,7 @@ sentence instead.
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 from pathlib import Path
@@ -130,11 +131,12 @@ def mat_variables(path: Path) -> dict[str, np.ndarray]:
     else:
         from scipy.io import loadmat
 
-        why = check_v5_tags(read_bytes(path))
+        content = read_bytes(path)  # read once: walked here, then parsed from memory
+        why = check_v5_tags(content)
         if why:
             raise TraceReadError(path, f"damaged MATLAB .mat file: {why}; write or export "
                                  "it again (a copy may have been cut short)")  # fmt: skip
-        raw = loadmat(path)
+        raw = loadmat(io.BytesIO(content))
     found = {str(k): _vector(v) for k, v in raw.items() if not str(k).startswith("__")}
     return {k: v for k, v in found.items() if v is not None}
 
