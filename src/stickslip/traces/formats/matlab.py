@@ -31,15 +31,19 @@ from typing import Any
 import numpy as np
 
 from stickslip.traces.formats.common import FORMAT_NAMES, read_bytes
-from stickslip.traces.formats.text import traces_from_columns
+from stickslip.traces.formats.text import (
+    AXES,
+    POSITION,
+    SIGNALS,
+    column_kind,
+    traces_from_columns,
+)
 from stickslip.traces.trace import Trace, TraceReadError
 
 #: The text that opens a version 7.3 file's header (the rest of the file is HDF5).
 MAT73 = b"MATLAB 7.3"
 #: What ``inspect`` and the rows call the format.
 FORMAT = FORMAT_NAMES[".mat"]
-#: Names that are the axis of a recording, not a signal.
-_AXES = ("x", "t", "time")
 _NO_VECTOR = ("holds no vector of numbers: save the recording as vectors, e.g. x_nm and "
               "force_nN, or t and the force with its unit")
 
@@ -142,7 +146,7 @@ def mat_variables(path: Path) -> dict[str, np.ndarray]:
 
 
 def _is_axis(name: str) -> bool:
-    return name.partition("_")[0] in _AXES
+    return column_kind(name) in AXES
 
 
 def read_mat(path: Path, **options: Any) -> list[Trace]:
@@ -156,7 +160,7 @@ def read_mat(path: Path, **options: Any) -> list[Trace]:
     names = [n for n, v in vectors.items() if v.size == length]
     data = np.column_stack([vectors[n] for n in names])
     signals = [n for n in names if not _is_axis(n)]
-    named = any(n.partition("_")[0] in ("force", "trace", "retrace") for n in signals)
+    named = any(column_kind(n) in SIGNALS for n in signals)
     if not named and len(signals) == 1 and any(_is_axis(n) for n in names):
         traces = [_unitless(path, names, data, signals[0], options)]
     else:
@@ -171,7 +175,7 @@ def _unitless(path: Path, names: list[str], data: np.ndarray, signal: str,
     """The one trace of a signal without a unit, in nN by ``--calibration``."""
     cal = options.get("calibration_nN_per_V")
     if cal is None:
-        timed = not any(n.partition("_")[0] == "x" for n in names)
+        timed = not any(column_kind(n) == POSITION for n in names)
         speed = (" and the support's speed with --velocity (nm/s; the axis is time)"
                  if timed and options.get("velocity_nm_per_s") is None else "")
         raise TraceReadError(path, f"'{signal}' has no unit: pass --calibration with its "

@@ -59,18 +59,34 @@ NEEDED = ("needs columns x_nm,force_nN (any length unit for x: pm, A, nm, um, mm
 FORMAT_LOOP = "friction loop (text)"
 
 
+#: The name of a position column (``x_<length unit>``).
+POSITION = "x"
+#: The names of a time axis (``t_<time unit>``, ``time_<time unit>``; bare: seconds).
+TIME_AXES = ("t", "time")
+#: Every axis name: a column so named is where the samples are, not a signal.
+AXES = (POSITION, *TIME_AXES)
+#: The names of the signal columns (``<name>_<force or voltage unit>``).
+SIGNALS = ("force", "trace", "retrace")
+
+
+def column_kind(name: str) -> str:
+    """What a column name says before its unit: ``x_nm`` -> ``x``, ``time`` -> ``time``."""
+    return name.partition("_")[0]
+
+
 def _unit_columns(header: Sequence[str], prefix: str, bare: bool = False) -> tuple[str, ...]:
     """The columns named ``<prefix>_<unit>`` whose unit this reader converts (lengths for
-    ``x``, forces or voltages otherwise), and the bare ``<prefix>`` where allowed (volts)."""
+    the position, times for a time axis, forces or voltages for a signal), and the bare
+    ``<prefix>`` where allowed (a signal in volts, a time axis in seconds)."""
     found = []
     for h in header:
         name, _, unit = h.partition("_")
         if name != prefix or (not unit and not bare):
             continue
-        if not unit or (prefix == "x" and length_scale_to_nm(unit)) or (
-                prefix in ("t", "time") and time_scale_to_s(unit)) or (
-                prefix not in ("x", "t", "time") and (force_scale_to_nN(unit)
-                                                      or volt_scale_to_V(unit))):  # fmt: skip
+        if not unit or (prefix == POSITION and length_scale_to_nm(unit)) or (
+                prefix in TIME_AXES and time_scale_to_s(unit)) or (
+                prefix not in AXES and (force_scale_to_nN(unit)
+                                        or volt_scale_to_V(unit))):  # fmt: skip
             found.append(h)
     return tuple(found)
 
@@ -212,9 +228,9 @@ def traces_from_columns(
         or if the values do not form a valid trace.
     """
     header = [h.strip() for h in header]
-    xcol = _one(header, _unit_columns(header, "x"), path, "position")
-    tcol_time = None if xcol else _one(header, _unit_columns(header, "t", bare=True)
-                                       + _unit_columns(header, "time", bare=True), path, "time")
+    xcol = _one(header, _unit_columns(header, POSITION), path, "position")
+    times = tuple(c for axis in TIME_AXES for c in _unit_columns(header, axis, bare=True))
+    tcol_time = None if xcol else _one(header, times, path, "time")
     fcol = _one(header, _unit_columns(header, "force"), path, "force")
     tcol = _one(header, _unit_columns(header, "trace", bare=True), path, "trace")
     rcol = _one(header, _unit_columns(header, "retrace", bare=True), path, "retrace")
