@@ -132,3 +132,29 @@ def test_dynamics_config_round_trips_and_gets_its_own_cache_file(tmp_path):
     cfg = with_dynamics(RandomisedConfig(n=10, seed=1))
     assert RandomisedConfig.from_json(cfg.to_json()) == cfg
     assert cache_path(cfg, tmp_path) != cache_path(RandomisedConfig(n=10, seed=1), tmp_path)
+
+
+def test_log_fraction_draws_soft_contacts_evenly_in_their_logarithm():
+    uniform, _ = draw_randomised(RandomisedConfig(n=4000, seed=5))
+    log, _ = draw_randomised(RandomisedConfig(n=4000, seed=5, log_fraction=1.0))
+    lo, hi = RandomisedConfig().ranges.K_N_m
+    # a uniform draw leaves few soft contacts; log-uniform gives each decade its share
+    # (less what the eta window cuts off at the box's corners)
+    assert (uniform["K_N_m"] < 5).mean() < 0.1
+    assert (log["K_N_m"] < 5).mean() > 0.3
+    for t in (uniform, log):
+        assert np.all((t["K_N_m"] >= lo) & (t["K_N_m"] <= hi))
+        assert np.all((t["eta"] >= 1.2 * 0.999) & (t["eta"] <= 42.0 * 1.001))
+    # the log-drawn values are not the uniform ones transformed: a stream of their own
+    assert np.corrcoef(np.log(uniform["K_N_m"]), np.log(log["K_N_m"]))[0, 1] < 0.1
+
+
+def test_log_fraction_mixes_the_two_draws_and_keeps_the_digest_of_older_sets():
+    half, _ = draw_randomised(RandomisedConfig(n=4000, seed=5, log_fraction=0.5))
+    assert 0.15 < (half["K_N_m"] < 5).mean() < 0.3
+    # a config without the field serialises as before, so older sets keep their file
+    cfg = RandomisedConfig(n=10, seed=1)
+    assert "log_fraction" not in json.loads(cfg.to_json())
+    mixed = RandomisedConfig(n=10, seed=1, log_fraction=0.5)
+    assert RandomisedConfig.from_json(mixed.to_json()) == mixed
+    assert cache_path(mixed, "w") != cache_path(cfg, "w")

@@ -89,9 +89,19 @@ class RandomisedConfig:
     #: log-uniform factors on the preset's damping rate and tip mass (PhysicalSettings)
     damping_factor: tuple[float, float] = (1.0, 1.0)
     mass_factor: tuple[float, float] = (1.0, 1.0)
+    #: the share of trajectories whose (U0, K) are drawn log-uniform over ``ranges``
+    #: (:func:`~stickslip.simulators.sampling.sample_parameters` with ``log``), the rest
+    #: uniform as in the reference paper. A uniform draw puts most lines at large U0 and
+    #: K (7 % of them below 5 N/m), so a network trained on it shrinks a soft contact's K
+    #: towards the crowd wherever a line says little; scale parameters spanning decades
+    #: are drawn evenly in their logarithm.
+    log_fraction: float = 0.0
 
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), sort_keys=True)
+        d = dataclasses.asdict(self)
+        if d["log_fraction"] == 0.0:  # as sets made before the field was added: same digest
+            del d["log_fraction"]
+        return json.dumps(d, sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> RandomisedConfig:
@@ -142,7 +152,7 @@ def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], Su
     """
     rng = np.random.default_rng([config.seed, 31])
     n = config.n
-    U0_ref, K = sample_parameters(config.ranges, n, config.seed, A_REF_NM)
+    U0_ref, K = _draw_barriers(config)
     a = rng.uniform(*config.lattice_nm, n)
     U0 = U0_ref * (a / A_REF_NM) ** 2
     v = rng.choice(np.asarray(config.velocities_nm_per_s, float), n)
@@ -165,6 +175,18 @@ def draw_randomised(config: RandomisedConfig) -> tuple[dict[str, np.ndarray], Su
         "defect_count": np.count_nonzero(sub.defect_height, axis=1),
     }  # fmt: skip
     return table, sub
+
+
+def _draw_barriers(config: RandomisedConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(U0, K) on the reference lattice per trajectory: a ``log_fraction`` of them
+    log-uniform, the rest uniform, in an order of their own stream."""
+    n_log = int(round(config.log_fraction * config.n))
+    U0, K = sample_parameters(config.ranges, config.n - n_log, config.seed, A_REF_NM)
+    if n_log == 0:
+        return U0, K
+    U0_log, K_log = sample_parameters(config.ranges, n_log, config.seed, A_REF_NM, log=True)
+    order = np.random.default_rng([config.seed, 33]).permutation(config.n)
+    return np.concatenate([U0, U0_log])[order], np.concatenate([K, K_log])[order]
 
 
 def _draw_dynamics(config: RandomisedConfig, v: np.ndarray

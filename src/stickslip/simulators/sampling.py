@@ -23,23 +23,31 @@ def latin_hypercube(n: int, dims: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def sample_parameters(
-    ranges: ParameterRange, n: int, seed: int, lattice_nm: float
+    ranges: ParameterRange, n: int, seed: int, lattice_nm: float, log: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Draw ``n`` (U0_eV, K_N_m) pairs: Latin hypercube over the box, eta window enforced.
 
-    Batches of Latin-hypercube points (uniform in U0 and K) are drawn and points outside
-    the eta window rejected until ``n`` are kept. Deterministic in ``seed``.
+    Batches of Latin-hypercube points (uniform in U0 and K, the reference paper's draw;
+    with ``log``, uniform in ln U0 and ln K, from a stream of its own) are drawn and
+    points outside the eta window rejected until ``n`` are kept. Deterministic in
+    ``seed``.
     """
     ranges.check_feasible(lattice_nm)
-    rng = np.random.default_rng([seed, _TAG_PARAMS])
+    rng = np.random.default_rng([seed, _TAG_PARAMS, 1] if log else [seed, _TAG_PARAMS])
     (u_lo, u_hi), (k_lo, k_hi), (e_lo, e_hi) = ranges.U0_eV, ranges.K_N_m, ranges.eta
+    if log and u_lo <= 0:
+        raise ValueError(f"a log-uniform draw needs U0 > 0 (range {ranges.U0_eV} eV)")
+
+    def spread(lo: float, hi: float, u: np.ndarray) -> np.ndarray:
+        return np.exp(np.log(lo) + np.log(hi / lo) * u) if log else lo + (hi - lo) * u
+
     kept_U, kept_K = [], []
     have = 0
     for _ in range(1000):
         batch = max(2 * (n - have), 64)
         pts = latin_hypercube(batch, 2, rng)
-        U0 = u_lo + (u_hi - u_lo) * pts[:, 0]
-        K = k_lo + (k_hi - k_lo) * pts[:, 1]
+        U0 = spread(u_lo, u_hi, pts[:, 0])
+        K = spread(k_lo, k_hi, pts[:, 1])
         eta = eta_from(U0, K, lattice_nm)
         ok = (eta >= e_lo) & (eta <= e_hi)
         kept_U.append(U0[ok])
