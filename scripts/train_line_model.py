@@ -34,7 +34,8 @@ MODEL (trained by this script with the same arguments, the calibration's own set
 --calibration-draws and --spread-power aside) on the same validation trajectories.
 
 Usage: python scripts/train_line_model.py [--n 4000] [--seeds 102 103 105] [--typical 1500]
-       [--typical-seed 104] [--typical-fraction 0.8] [--paper 1500] [--paper-seed 5]
+       [--typical-seed 104] [--log-fraction 0] [--typical-fraction 0.8] [--paper 1500]
+       [--paper-seed 5]
        [--members 3] [--epochs 45] [--expert clean|bundled|none|PATH]
        [--spread-hidden 128] [--calibration-draws 8] [--no-spread-power] [--families 0.5]
        [--work build/line-train] [--out PATH] [--recalibrate MODEL]
@@ -77,6 +78,9 @@ def main() -> None:
     ap.add_argument("--typical", type=int, default=RECIPE.typical,
                     help="trajectories on a typical measurement's substrate (lab_config) added")
     ap.add_argument("--typical-seed", type=int, default=RECIPE.typical_seed)
+    ap.add_argument("--log-fraction", type=float, default=RECIPE.log_fraction,
+                    help="share of the randomised and typical trajectories whose U0 and K "
+                         "are drawn log-uniform (the rest uniform, as in the paper)")  # fmt: skip
     ap.add_argument("--typical-fraction", type=float, default=TYPICAL_FRACTION,
                     help="fraction of lines given a typical instrument's detector effects")
     ap.add_argument("--members", type=int, default=LineTrainConfig.members)
@@ -109,7 +113,8 @@ def main() -> None:
     args = ap.parse_args()
     recipe = BundledRecipe(n=args.n, seeds=tuple(args.seeds), typical=args.typical,
                            typical_seed=args.typical_seed, paper=args.paper,
-                           paper_seed=args.paper_seed)  # fmt: skip
+                           paper_seed=args.paper_seed,
+                           log_fraction=args.log_fraction)  # fmt: skip
     try:
         training = bundled_line_data(args.work, recipe)
     except TrainingDataError as e:

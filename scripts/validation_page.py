@@ -6,7 +6,9 @@ Reads ``classical_stress.json`` (``benchmarks/classical_stress.py --json``),
 ``acquisition.json`` and ``acquisition_baseline.json`` (``benchmarks/acquisition.py
 --json``),
 ``map_pooling.json`` (``benchmarks/map_pooling.py``'s ``last_run.json``),
-``contacts.json`` (``benchmarks/contacts.py --json``) and
+``contacts.json`` (``benchmarks/contacts.py --json``),
+``soft_contacts.json`` and ``soft_contacts_baseline.json``
+(``benchmarks/soft_contacts.py --json``) and
 ``transcribed.json`` (figures of benchmarks that write no JSON yet, each transcribed with
 its command and date) from ``--data``; without ``--out`` the page goes to stdout. The
 docs build (mkdocs-gen-files, ``scripts/docs_pages.py``) calls :func:`page`. To refresh
@@ -162,6 +164,34 @@ def _contacts(doc: dict) -> list[str]:
     return [*lines, ""]
 
 
+def _soft(doc: dict, base: dict | None) -> list[str]:
+    """Soft contacts on coarse pixels (benchmarks/soft_contacts.py --json), beside the
+    model before where recorded."""
+    lines = ["## The learned model: soft contacts on coarse pixels", "",
+             f"Clean PT lines with white noise (0-0.05 nN), U0 and K log-uniform, stated "
+             f"conditions right, three pixel sizes (seed {doc['seed']}, used by nothing "
+             f"else), `{doc['command']} --json FILE`; {doc['machine']}. Rows answered, by "
+             f"true K" + (f"; before: the previous bundled model, the same command on the "
+                          f"same lines ({base['machine'][-20:]})." if base else "."), "",
+             "| pixels | K (N/m) | lines | K bias | K RMSE | K cov95 | U0 bias | U0 RMSE "
+             "| U0 cov95 |" + (" before: K bias, K RMSE, U0 RMSE |" if base else ""),
+             "|---|---|---|---|---|---|---|---|---|" + ("---|" if base else "")]
+    for level, bins in doc["levels"].items():
+        for name, g in bins.items():
+            k, u = g["answered"]["K_N_m"], g["answered"]["U0_eV"]
+            before = ""
+            if base and level in base["levels"] and name in base["levels"][level]:
+                b = base["levels"][level][name]["answered"]
+                before = (f" {100 * b['K_N_m']['bias_median']:+.1f} %, "
+                          f"{_pct(b['K_N_m']['rel_rmse'])}, {_pct(b['U0_eV']['rel_rmse'])} |")
+            lines.append(
+                f"| {level} | {name} | {g['lines']} | {100 * k['bias_median']:+.1f} % | "
+                f"{_pct(k['rel_rmse'])} | {k['coverage95']:.3f} | "
+                f"{100 * u['bias_median']:+.1f} % | {_pct(u['rel_rmse'])} | "
+                f"{u['coverage95']:.3f} |{before}")
+    return [*lines, ""]
+
+
 def page(data: Path = DATA) -> str:
     """The validation page (Markdown) from the JSON files in ``data``."""
     out = ["# Validation: current figures", "",
@@ -180,6 +210,10 @@ def page(data: Path = DATA) -> str:
         base = data / "acquisition_baseline.json"
         out += _acquisition(json.loads((data / "acquisition.json").read_text()),
                             json.loads(base.read_text()) if base.exists() else None)
+    if (data / "soft_contacts.json").exists():
+        base = data / "soft_contacts_baseline.json"
+        out += _soft(json.loads((data / "soft_contacts.json").read_text()),
+                     json.loads(base.read_text()) if base.exists() else None)
     return "\n".join(out).replace("<F>", "⟨F⟩") + "\n"
 
 

@@ -64,12 +64,24 @@ def test_bundled_recipe_data_stays_on_disk_and_records_its_parts(tmp_path):
     d = training.data
     assert d.n == 6 + 6 + 4 + 4 and isinstance(d.force_nN, Rows)  # streamed, not loaded
     assert len(training.parts) == 4 and all(p["fingerprint"] for p in training.parts)
-    from stickslip.simulators.randomised import RandomisedConfig, cache_path, with_dynamics
+    from stickslip.simulators.randomised import RandomisedConfig, cache_path
 
     # the recipe randomises the dynamics: the set's file carries its config's digest
-    first = load_dataset(cache_path(with_dynamics(RandomisedConfig(n=6, seed=11)), tmp_path))
+    config = recipe.prior(RandomisedConfig(n=6, seed=11))
+    assert config.log_fraction == recipe.log_fraction
+    first = load_dataset(cache_path(config, tmp_path))
     assert np.ptp(first.params["temperature_K"]) > 0
     np.testing.assert_array_equal(d.force_nN[:6], first.force_nN)
     # a second call reuses the cached sets
     again = bundled_line_data(tmp_path, recipe, progress=False)
     assert [p["fingerprint"] for p in again.parts] == [p["fingerprint"] for p in training.parts]
+
+
+def test_bundled_recipe_prior_carries_its_draw_of_barriers():
+    from stickslip.simulators.randomised import RandomisedConfig
+
+    base = RandomisedConfig(n=6, seed=11)
+    assert BundledRecipe().prior(base).log_fraction == 0.0  # the bundled model's: uniform
+    assert BundledRecipe(log_fraction=0.5).prior(base).log_fraction == 0.5
+    # the dynamics are randomised either way
+    assert BundledRecipe(log_fraction=0.5).prior(base).damping_factor != base.damping_factor

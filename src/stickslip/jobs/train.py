@@ -17,6 +17,7 @@ reproduces it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -89,11 +90,17 @@ class BundledRecipe:
     #: (:data:`~stickslip.simulators.randomised.DYNAMICS_PRIOR`); the paper-preset lines
     #: stay at the preset
     dynamics: bool = True
+    #: the share of the randomised and typical sets' (U0, K) drawn log-uniform
+    #: (:attr:`~stickslip.simulators.randomised.RandomisedConfig.log_fraction`); the
+    #: bundled model draws them uniformly, as the reference paper does (half log-uniform
+    #: was tried: docs/explanation/learned-model.md, "Alternatives considered")
+    log_fraction: float = 0.0
 
     def prior(self, config: RandomisedConfig) -> RandomisedConfig:
-        """``config`` with the recipe's dynamics and acquisition (where it has them): what
-        sets meant to look like the training lines (calibration pools, the domain
-        reference) are drawn from."""
+        """``config`` with the recipe's draw of (U0, K), dynamics and acquisition (where
+        it has them): what sets meant to look like the training lines (calibration
+        pools, the domain reference) are drawn from."""
+        config = dataclasses.replace(config, log_fraction=self.log_fraction)
         return with_dynamics(config) if self.dynamics else config
 
 
