@@ -1,11 +1,11 @@
 """Soft contacts on coarse pixels: the line model's K and U0 by true stiffness and pixel.
 
-Why: a network trained on a prior is pulled towards where that prior crowds its lines
-wherever a line says little (coarse pixels, noise). The reference paper draws U0 and K
-uniformly, which puts 3 % of the lines below K = 5 N/m; a soft contact read on a coarse
-scan then comes out too stiff. This benchmark measures that bias, per level of pixel
-coarseness and per decade-ish bin of the true K, for any line model, so that two
-models (or two priors) are compared on the same lines.
+Why: a line that says little about K (coarse pixels, noise) leaves the network to fall
+back on what it learned from its training prior, and the bundled model reads soft
+contacts on coarse scans too stiff. This benchmark measures that bias, per level of
+pixel coarseness and per band of the true K, for any line model, so that two models
+(or two priors: ``scripts/train_line_model.py --log-fraction``) are compared on the
+same lines.
 
 How the set is made: by ``benchmarks/acquisition.py``'s own generator (its ``Draw``:
 U0 log-uniform 0.3-5 eV, K log-uniform 2-50 N/m, eta 2-35, lattice 0.24-0.33 nm, white
