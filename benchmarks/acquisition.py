@@ -449,8 +449,10 @@ def groups_of(ls: LineSet) -> dict[str, np.ndarray]:
     return out
 
 
-def score_set(ls: LineSet, estimator: Any) -> tuple[dict[str, Any], float]:
-    """Predict every line of a set through ``stickslip.predict``; metrics per group."""
+def predict_set(ls: LineSet, estimator: Any
+                ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], float]:  # fmt: skip
+    """Predict every line of a set through ``stickslip.predict`` as a user calls it: the
+    rows in the set's order, the truths of ``TARGETS`` and the seconds it took."""
     import stickslip
 
     traces = traces_of(ls)
@@ -458,8 +460,13 @@ def score_set(ls: LineSet, estimator: Any) -> tuple[dict[str, Any], float]:
     table = stickslip.predict(traces, model=estimator)
     seconds = time.perf_counter() - t0
     by_name = {r["trace"]: r for r in table.rows}
-    rows = [by_name[t.name] for t in traces]
     truth = {k: np.asarray(ls.params[k], float) for k in TARGETS}
+    return [by_name[t.name] for t in traces], truth, seconds
+
+
+def score_set(ls: LineSet, estimator: Any) -> tuple[dict[str, Any], float]:
+    """:func:`predict_set`, then the metrics per group (:func:`groups_of`)."""
+    rows, truth, seconds = predict_set(ls, estimator)
     return {g: group_metrics(rows, truth, m) for g, m in groups_of(ls).items()}, seconds
 
 

@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 from _machine import machine_line
-from acquisition import Draw, Level, SetSpec, cached_set, group_metrics, traces_of
+from acquisition import Draw, Level, SetSpec, cached_set, group_metrics, predict_set
+
+from stickslip.atomic import write_text_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 48101
@@ -52,18 +53,11 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = ap.parse_args()
 
-    import stickslip
-
-    print(machine_line())
+    machine = machine_line()
+    print(machine)
     ls = cached_set(SPEC, Draw(), args.cache)
-    traces = traces_of(ls)
-    t0 = time.perf_counter()
-    table = stickslip.predict(traces, model=args.model)
-    seconds = time.perf_counter() - t0
-    by_name = {r["trace"]: r for r in table.rows}
-    rows = [by_name[t.name] for t in traces]
+    rows, truth, seconds = predict_set(ls, args.model)
     p = ls.params
-    truth = {k: np.asarray(p[k], float) for k in ("F_mean_nN", "U0_eV", "K_N_m")}
     print(f"model: {args.model or 'bundled'}; {len(rows)} lines read in {seconds:.1f} s")
     print(f"{'level':14s} {'K bin':>8s} {'n':>4s} {'answ':>5s} | {'K bias':>7s} {'K rRMSE':>7s} "
           f"{'K cov':>5s} | {'U0 bias':>7s} {'U0 rRMSE':>8s} {'U0 cov':>6s}")  # fmt: skip
@@ -83,12 +77,11 @@ def main() -> None:
                   f"{u.get('rel_rmse', np.nan):8.3f} "
                   f"{u.get('coverage95', np.nan):6.2f}")  # fmt: skip
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
         doc = {"command": "python benchmarks/soft_contacts.py"
                           + (f" --model {args.model}" if args.model else ""),
-               "machine": machine_line(), "seed": SEED, "model": args.model or "bundled",
+               "machine": machine, "seed": SEED, "model": args.model or "bundled",
                "seconds": seconds, "levels": out}  # fmt: skip
-        args.json.write_text(json.dumps(doc, indent=1, default=float))
+        write_text_atomic(args.json, json.dumps(doc, indent=1, default=float))
 
 
 if __name__ == "__main__":
