@@ -23,7 +23,7 @@ cached in ``--cache`` (default build/soft_contacts/). Scored through
 Printed per level and per bin of true K (2-5, 5-10, 10-20, 20-50 N/m): lines answered,
 the median relative bias and the relative RMSE of K and U0, and the 95 % coverage.
 
-Usage: python benchmarks/soft_contacts.py [--model PATH] [--json OUT]
+Usage: python benchmarks/soft_contacts.py [--model PATH] [--json OUT] [--seed N]
 """
 
 from __future__ import annotations
@@ -41,9 +41,17 @@ from stickslip.atomic import write_text_atomic
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 48101
 K_BINS = ((2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 50.0))
-SPEC = SetSpec("soft", SEED, tuple(
-    Level(f"{p} px {length:g} nm", 128, {"pixels": p, "length_nm": length})
-    for p, length in ((512, 11.0), (512, 22.0), (384, 25.0))))  # fmt: skip
+LEVELS = tuple(Level(f"{p} px {length:g} nm", 128, {"pixels": p, "length_nm": length})
+               for p, length in ((512, 11.0), (512, 22.0), (384, 25.0)))  # fmt: skip
+
+
+def set_spec(seed: int = SEED) -> SetSpec:
+    """The soft-contact set drawn on ``seed`` (its cache file is named by the seed, so
+    sets on two seeds live side by side)."""
+    return SetSpec("soft" if seed == SEED else f"soft_{seed}", seed, LEVELS)
+
+
+SPEC = set_spec()
 
 
 def main() -> None:
@@ -51,21 +59,24 @@ def main() -> None:
     ap.add_argument("--model", default=None, help="a line model file (default: the bundled)")
     ap.add_argument("--cache", type=Path, default=ROOT / "build" / "soft_contacts")
     ap.add_argument("--json", type=Path, default=None, help="write the figures here")
+    ap.add_argument("--seed", type=int, default=SEED,
+                    help=f"draw the set on this seed (default {SEED})")
     args = ap.parse_args()
+    spec = set_spec(args.seed)
 
     machine = machine_line()
     print(machine)
-    ls = cached_set(SPEC, Draw(), args.cache)
+    ls = cached_set(spec, Draw(), args.cache)
     rows, truth, seconds = predict_set(ls, args.model)
     p = ls.params
     print(f"model: {args.model or 'bundled'}; {len(rows)} lines read in {seconds:.1f} s")
     print(f"{'level':14s} {'K bin':>8s} {'n':>4s} {'answ':>5s} | {'K bias':>7s} {'K rRMSE':>7s} "
           f"{'K cov':>5s} | {'U0 bias':>7s} {'U0 rRMSE':>8s} {'U0 cov':>6s}")  # fmt: skip
     out: dict[str, dict[str, dict]] = {}
-    for j, lv in enumerate(SPEC.levels):
+    for j, lv in enumerate(spec.levels):
         out[lv.label] = {}
         bins = [(f"{lo:g}-{hi:g}", (p["K_N_m"] >= lo) & (p["K_N_m"] < hi)) for lo, hi in K_BINS]
-        for name, in_bin in [*bins, ("all", np.ones(SPEC.n, bool))]:
+        for name, in_bin in [*bins, ("all", np.ones(spec.n, bool))]:
             mask = (p["level"] == j) & in_bin
             g = group_metrics(rows, truth, mask)
             out[lv.label][name] = g
@@ -78,8 +89,9 @@ def main() -> None:
                   f"{u.get('coverage95', np.nan):6.2f}")  # fmt: skip
     if args.json:
         doc = {"command": "python benchmarks/soft_contacts.py"
-                          + (f" --model {args.model}" if args.model else ""),
-               "machine": machine, "seed": SEED, "model": args.model or "bundled",
+                          + (f" --model {args.model}" if args.model else "")
+                          + (f" --seed {args.seed}" if args.seed != SEED else ""),
+               "machine": machine, "seed": args.seed, "model": args.model or "bundled",
                "seconds": seconds, "levels": out}  # fmt: skip
         write_text_atomic(args.json, json.dumps(doc, indent=1, default=float))
 
