@@ -45,6 +45,7 @@ bench-learn: $(STAMP)
 	$(BIN)/python benchmarks/coverage_check.py
 	$(BIN)/python benchmarks/encoder_vs_mlp.py
 	$(BIN)/python benchmarks/soft_contacts.py
+	$(BIN)/python benchmarks/soft_contacts.py --model classical
 
 model: $(STAMP)
 	$(BIN)/python scripts/train_default_model.py

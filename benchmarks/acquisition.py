@@ -363,8 +363,10 @@ def target_metrics(key: str, y: np.ndarray, est: np.ndarray, lo95: np.ndarray,
     out: dict[str, float] = {"n": n}
     if n == 0:
         return out
-    cov95 = float(np.mean((y >= lo95) & (y <= hi95)))
-    cov68 = float(np.mean((y >= lo68) & (y <= hi68)))
+    # an estimator without intervals (the classical one) has no coverage, not 0
+    intervals = bool(np.any(np.isfinite(lo95) & np.isfinite(hi95)))
+    cov95 = float(np.mean((y >= lo95) & (y <= hi95))) if intervals else nan
+    cov68 = float(np.mean((y >= lo68) & (y <= hi68))) if intervals else nan
     with np.errstate(divide="ignore", invalid="ignore"):
         if key in LOG_TARGETS:
             rel = est / y - 1.0

@@ -164,31 +164,33 @@ def _contacts(doc: dict) -> list[str]:
     return [*lines, ""]
 
 
-def _soft(doc: dict, base: dict | None) -> list[str]:
+def _soft(doc: dict, classical: dict | None) -> list[str]:
     """Soft contacts on coarse pixels (benchmarks/soft_contacts.py --json), beside the
-    model before where recorded."""
+    classical estimator on the same lines where recorded (``--model classical``)."""
     lines = ["## The learned model: soft contacts on coarse pixels", "",
              f"Clean PT lines with white noise (0-0.05 nN), U0 and K log-uniform, stated "
              f"conditions right, three pixel sizes (seed {doc['seed']}, used by nothing "
              f"else), `{doc['command']} --json FILE`; {doc['machine']}. Rows answered, by "
-             f"true K" + (f"; before: the previous bundled model, the same command on the "
-                          f"same lines ({base['machine'][-20:]})." if base else "."), "",
+             f"true K" + (f"; classical: the classical estimator on the same lines, "
+                          f"`{classical['command']}` (it gives no intervals)."
+                          if classical else "."), "",
              "| pixels | K (N/m) | lines | K bias | K RMSE | K cov95 | U0 bias | U0 RMSE "
-             "| U0 cov95 |" + (" before: K bias, K RMSE, U0 RMSE |" if base else ""),
-             "|---|---|---|---|---|---|---|---|---|" + ("---|" if base else "")]
+             "| U0 cov95 |" + (" classical: answered, K bias, K RMSE |" if classical else ""),
+             "|---|---|---|---|---|---|---|---|---|" + ("---|" if classical else "")]
     for level, bins in doc["levels"].items():
         for name, g in bins.items():
             k, u = g["answered"]["K_N_m"], g["answered"]["U0_eV"]
-            before = ""
-            if base and level in base["levels"] and name in base["levels"][level]:
-                b = base["levels"][level][name]["answered"]
-                before = (f" {100 * b['K_N_m']['bias_median']:+.1f} %, "
-                          f"{_pct(b['K_N_m']['rel_rmse'])}, {_pct(b['U0_eV']['rel_rmse'])} |")
+            beside = ""
+            if classical and name in classical["levels"].get(level, {}):
+                c = classical["levels"][level][name]
+                ck = c["answered"]["K_N_m"]
+                beside = (f" {_pct((c['lines'] - c['refused']) / max(c['lines'], 1))}, "
+                          f"{100 * ck['bias_median']:+.1f} %, {_pct(ck['rel_rmse'])} |")
             lines.append(
                 f"| {level} | {name} | {g['lines']} | {100 * k['bias_median']:+.1f} % | "
                 f"{_pct(k['rel_rmse'])} | {k['coverage95']:.3f} | "
                 f"{100 * u['bias_median']:+.1f} % | {_pct(u['rel_rmse'])} | "
-                f"{u['coverage95']:.3f} |{before}")
+                f"{u['coverage95']:.3f} |{beside}")
     return [*lines, ""]
 
 
@@ -211,9 +213,9 @@ def page(data: Path = DATA) -> str:
         out += _acquisition(json.loads((data / "acquisition.json").read_text()),
                             json.loads(base.read_text()) if base.exists() else None)
     if (data / "soft_contacts.json").exists():
-        base = data / "soft_contacts_baseline.json"
+        other = data / "soft_contacts_classical.json"
         out += _soft(json.loads((data / "soft_contacts.json").read_text()),
-                     json.loads(base.read_text()) if base.exists() else None)
+                     json.loads(other.read_text()) if other.exists() else None)
     return "\n".join(out).replace("<F>", "⟨F⟩") + "\n"
 
 
