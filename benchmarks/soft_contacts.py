@@ -55,8 +55,6 @@ def set_spec(seed: int = SEED) -> SetSpec:
     return SetSpec(f"soft_{seed}", seed, LEVELS)
 
 
-SPEC = set_spec()
-
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
