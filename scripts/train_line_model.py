@@ -100,7 +100,7 @@ def main() -> None:
                     help="put the effect families (the broad nuisance prior, 'train' "
                          "implementations) on this fraction of the non-pristine training "
                          "lines (0: none)")  # fmt: skip
-    ap.add_argument("--coarse", type=float, default=0.3, metavar="FRACTION",
+    ap.add_argument("--coarse", type=float, default=RECIPE.coarse_fraction, metavar="FRACTION",
                     help="re-pixelate this fraction of the lines coarser (1-4x the "
                          "simulated pixel), as larger detector pixels record them")  # fmt: skip
     ap.add_argument("--expert", default="clean",

@@ -10,6 +10,7 @@ import torch
 from typer.testing import CliRunner
 
 from stickslip.cli.main import app
+from stickslip.conditions import GRAPHITE
 from stickslip.simulators import PRESETS, SweepConfig, run_sweep, simulate
 from stickslip.traces.trace import write_trace_csv
 
@@ -145,6 +146,34 @@ def test_train_and_evaluate_small(tmp_path):
     assert r.exit_code == 2 and len(_errors(r)) == 1
     r = _run(["train", "--kind", "window", "--data", data, "--features", "fft", "--out", model])
     assert r.exit_code == 2 and "raw or pi" in r.stderr
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (["--recipe", "bundled"], "recipe"),
+    (["--recipe", "bundled", "--coarse", 0.0], 0.0),
+    (["--data", "{data}"], 0.0),
+    (["--data", "{data}", "--coarse", 0.25], 0.25),
+])  # fmt: skip
+def test_train_line_re_pixelates_as_the_bundled_recipe_does(args, expected, tmp_path,
+                                                             monkeypatch):  # fmt: skip
+    """Old: ``stickslip train --recipe bundled`` trained without the coarse pixels the
+    bundled model's script draws, so it did not reproduce the bundled model."""
+    import stickslip.jobs.train as tr
+
+    data = tmp_path / "s.h5"
+    run_sweep(SweepConfig(n=6, seed=9), data, progress=False)
+    seen = {}
+    monkeypatch.setattr(tr, "bundled_line_data",
+                        lambda *a, **k: tr.read_training_data([data], None, GRAPHITE))
+    monkeypatch.setattr(tr, "expert_model", lambda *a, **k: None)
+    monkeypatch.setattr(tr, "train_line", lambda training, out, cfg, *a, **k: seen.update(cfg=cfg))
+    monkeypatch.setattr(tr, "line_validation", lambda report: "validation")
+    r = _run(["train", *[str(a).format(data=data) for a in args], "--out", tmp_path / "m.pt"])
+    assert r.exit_code == 0, r.output
+    want = tr.BundledRecipe().coarse_fraction if expected == "recipe" else expected
+    assert seen["cfg"].coarse_fraction == want
+    r = _run(["train", "--data", data, "--coarse", 1.5, "--out", tmp_path / "m.pt"])
+    assert r.exit_code == 2 and "--coarse" in _errors(r)[0]
 
 
 def test_demo_runs(tmp_path):

@@ -302,6 +302,10 @@ def train_cmd(
     families: float = typer.Option(0.0, "--families", help="Line kind: fraction of the "
                                    "non-pristine training lines given a draw of the effect "
                                    "families (the broad nuisance prior; 0: none)."),
+    coarse: float | None = typer.Option(None, "--coarse", help="Line kind: fraction of the "
+                                        "training lines re-pixelated 1-4x coarser, as larger "
+                                        "pixels record them (default: the bundled recipe's "
+                                        "with --recipe bundled, else 0)."),
     workers: int = typer.Option(StreamSettings.num_workers, "--workers", help="Line kind: "
                                 "loader processes that read and corrupt the batches "
                                 "(0: in the training process)."),
@@ -322,8 +326,10 @@ def train_cmd(
         usage_error(f"--features must be raw or pi (got '{features}')")
     if (epochs is not None and epochs < 1) or (lr is not None and not lr > 0) or noise < 0:
         usage_error("--epochs and --lr must be positive, --noise >= 0")
-    if not 0.0 <= families <= 1.0 or workers < 0 or shuffle_rows < 1:
-        usage_error("--families must be in [0, 1], --workers >= 0, --shuffle-rows >= 1")
+    if (not 0.0 <= families <= 1.0 or not 0.0 <= (coarse or 0.0) <= 1.0 or workers < 0
+            or shuffle_rows < 1):  # fmt: skip
+        usage_error("--families and --coarse must be in [0, 1], --workers >= 0, "
+                    "--shuffle-rows >= 1")
     check_output_file("--out", out)
     try:
         if recipe == "bundled":
@@ -342,7 +348,9 @@ def train_cmd(
     info(f"training a {kind} model on {training.data.n} lines")
     try:
         if kind == "line":
-            cfg = LineTrainConfig(members=members, seed=seed,
+            if coarse is None:
+                coarse = tr.BundledRecipe().coarse_fraction if recipe == "bundled" else 0.0
+            cfg = LineTrainConfig(members=members, seed=seed, coarse_fraction=coarse,
                                   **family_settings(families),
                                   **{k: v for k, v in (("epochs", epochs), ("lr", lr),
                                                        ("batch_size", batch_size))

@@ -95,6 +95,12 @@ class BundledRecipe:
     #: bundled model draws them uniformly, as the reference paper does (half log-uniform
     #: was tried: docs/explanation/learned-model.md, "Alternatives considered")
     log_fraction: float = 0.0
+    #: the share of the training lines re-pixelated coarser, 1-4x the simulated pixel
+    #: (:attr:`~stickslip.estimators.line.training.LineTrainConfig.coarse_fraction`): a
+    #: setting of the training, not of the data, kept here so that every way of training
+    #: the bundled model (``scripts/train_line_model.py``, ``stickslip train --recipe
+    #: bundled``) draws the same
+    coarse_fraction: float = 0.3
 
     def prior(self, config: RandomisedConfig) -> RandomisedConfig:
         """``config`` with the recipe's draw of (U0, K), dynamics and acquisition (where
