@@ -84,7 +84,7 @@ from stickslip.estimators.line.modelfile import (
     save_line_model,
 )
 from stickslip.estimators.pairs import pair_friction, pair_parameters
-from stickslip.estimators.table import TARGETS, domain_verdict
+from stickslip.estimators.table import TARGETS, domain_verdict, has_estimate
 from stickslip.estimators.window.modelfile import load_bundled
 from stickslip.jobs.evaluate import evaluate, truth_from_traces
 from stickslip.jobs.train import BundledRecipe
@@ -179,8 +179,12 @@ def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> d
     truth = 0.5 * (trace.params["F_mean_nN"] + retrace.params["F_mean_nN"])
     single, pair, covered = [], [], []
     logs: dict[str, list] = {k: [[], [], [], []] for k in ("U0", "K")}  # single, pair, covs
+    refused = 0
     for i in np.flatnonzero(ok):
         rt, rr = rows[0][i], rows[1][i]
+        if not (has_estimate(rt) and has_estimate(rr)):  # a refusal has no numbers to score
+            refused += 1
+            continue
         single += [rt["F_mean_nN"] - trace.params["F_mean_nN"][i],
                    rr["F_mean_nN"] - retrace.params["F_mean_nN"][i]]  # fmt: skip
         cols = pair_friction(rt, rr)
@@ -194,7 +198,8 @@ def score_pairs(estimator: LineEstimator, trace: Dataset, retrace: Dataset) -> d
             s_cov += [r[f"{key}_lo95"] <= t <= r[f"{key}_hi95"] for r in (rt, rr)]
             p_err.append(np.log(params[name] / t))
             p_cov.append(params[f"{name}_lo95"] <= t <= params[f"{name}_hi95"])
-    out = {"n_pairs": int(ok.sum()), "single_rmse_nN": float(np.sqrt(np.mean(np.square(single)))),
+    out = {"n_pairs": int(ok.sum()) - refused, "refused_pairs": refused,
+           "single_rmse_nN": float(np.sqrt(np.mean(np.square(single)))),
            "pair_rmse_nN": float(np.sqrt(np.mean(np.square(pair)))),
            "pair_coverage95": float(np.mean(covered))}  # fmt: skip
     for k, (s_err, p_err, s_cov, p_cov) in logs.items():
@@ -300,7 +305,8 @@ def main() -> None:
         what = ("every family" if name == "pairs" else
                 "a careful measurement's detector effects (the lab bench's) only")  # fmt: skip
         print(f"\ntrace/retrace pairs with crosstalk on both and {what} (calibrated on the "
-              f"families): {pairs['n_pairs']} pairs; <F> RMSE single rows "
+              f"families): {pairs['n_pairs']} pairs scored ({pairs['refused_pairs']} with a "
+              f"refused row left out); <F> RMSE single rows "
               f"{pairs['single_rmse_nN']:.3f} nN, friction_pair_nN {pairs['pair_rmse_nN']:.3f} "
               f"nN, its 95 % coverage {pairs['pair_coverage95']:.3f}")  # fmt: skip
         for k in ("U0", "K"):

@@ -345,6 +345,12 @@ def nonfinite_reason(row: Mapping[str, Any], intervals: bool) -> str | None:
     if not bad:
         return None
     shown = ", ".join(f"{c} = {row.get(c)}" for c in bad[:3]) + (", ..." if len(bad) > 3 else "")
+    if all(_finite(row.get(k)) for k in names):
+        # the values came out but not their uncertainty: a learned model whose members
+        # disagree beyond any interval on a line unlike their training (not a unit slip)
+        return (f"the estimate's uncertainty is unbounded ({shown}): the estimator cannot "
+                "place this line, which lies far from what it was trained on; read it with "
+                "the classical estimator")
     return (f"the estimate is not a finite number ({shown}): the trace lies outside what "
             "this estimator can read; check its units and conditions")
 
