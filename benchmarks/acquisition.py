@@ -64,7 +64,8 @@ counted per level.
 
 Usage: NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 python benchmarks/acquisition.py
        [--model PATH] [--cache build/acquisition] [--json FILE] [--scale 1.0]
-       [--sets damping,mass,...] [--regenerate] [--code-note TEXT]
+       [--sets damping,mass,...] [--regenerate] [--code-note TEXT] [--contact ideal]
+       [--zero-offset] [--seed-shift N]
 
 The library is whatever ``import stickslip`` finds: to score the committed code while the
 working tree holds uncommitted edits, export it and put it first on the path, e.g.
@@ -561,6 +562,9 @@ def main() -> None:
     ap.add_argument("--regenerate", action="store_true", help="ignore the cache")
     ap.add_argument("--contact", default="any",
                     help="the contact stated to the line model (any, ideal: --contact)")
+    ap.add_argument("--zero-offset", action="store_true",
+                    help="state that the lines' zero carries no offset (--zero-offset): "
+                         "<F>'s interval is the model's own")  # fmt: skip
     ap.add_argument("--seed-shift", type=int, default=0,
                     help="move every set's seed by this (fresh sets within 41001-41099, "
                          "cached under --cache/shiftN)")  # fmt: skip
@@ -571,7 +575,7 @@ def main() -> None:
     )
     args = ap.parse_args()
     t_start = time.perf_counter()
-    from stickslip.estimators.load import load_estimator, state_contact
+    from stickslip.estimators.load import load_estimator, state_contact, state_zero_offset
 
     specs = {name: replace(spec, seed=spec.seed + args.seed_shift)
              for name, spec in set_specs(args.scale).items()}
@@ -593,7 +597,8 @@ def main() -> None:
           f"({prov['package']}" + (f", HEAD {prov['repo_head'][:10]}" if "repo_head" in prov
                                    else "") + ")" + (f"; {args.code_note}" if args.code_note
                                                       else ""))  # fmt: skip
-    estimator = state_contact(load_estimator(args.model), args.contact)
+    estimator = state_zero_offset(state_contact(load_estimator(args.model), args.contact),
+                                  args.zero_offset)  # fmt: skip
     print(f"estimator: {estimator.describe()}")
     draw = Draw()
     results: dict[str, Any] = {}

@@ -21,7 +21,7 @@ from stickslip.conditions import GRAPHITE
 from stickslip.estimators.base import Estimator
 from stickslip.estimators.line.ensemble import ANY_CONTACT
 from stickslip.estimators.line.training import LineTrainConfig
-from stickslip.estimators.load import load_estimator, state_contact
+from stickslip.estimators.load import load_estimator, state_contact, state_zero_offset
 from stickslip.estimators.table import ResultTable
 from stickslip.estimators.window.training import TrainConfig
 from stickslip.jobs import evaluate as ev
@@ -55,7 +55,7 @@ def predict(inputs: Sequence[Trace] | Sequence[PathLike],
             model: Estimator | PathLike | None = None, *, lattice_nm: float | None = None,
             velocity_nm_per_s: float | None = None, temperature_K: float | None = None,
             classical: bool = False, check: bool = False,
-            contact: str = ANY_CONTACT) -> ResultTable:  # fmt: skip
+            contact: str = ANY_CONTACT, zero_offset: bool = False) -> ResultTable:  # fmt: skip
     """Estimates for traces (or the files holding them): one row per trace, and per
     unreadable input; ``.to_frame()`` gives a DataFrame.
 
@@ -63,9 +63,11 @@ def predict(inputs: Sequence[Trace] | Sequence[PathLike],
     None for the bundled whole-line model. ``contact``: ``"ideal"`` where the tip is one
     asperity on a crystal without modulation or defects along the line (the line model's
     calibration for such contacts; :data:`~stickslip.estimators.line.ensemble.CONTACTS`).
+    ``zero_offset``: the lateral force's zero carries no offset (the line model's lone
+    lines then get its own <F> interval, without the offset term).
     """
     est = model if isinstance(model, Estimator) else load_estimator(model)
-    est = state_contact(est, contact)
+    est = state_zero_offset(state_contact(est, contact), zero_offset)
     traces, errors = _traces(inputs)
     return inf.infer(est, traces, errors, lattice_nm=lattice_nm,
                      velocity_nm_per_s=velocity_nm_per_s, temperature_K=temperature_K,

@@ -111,3 +111,35 @@ def test_predict_with_a_stated_contact_leaves_the_callers_estimator_alone():
     assert est.contact == "any"
     assert all(s["U0_eV_hi95"] - s["U0_eV_lo95"] < d["U0_eV_hi95"] - d["U0_eV_lo95"]
                for s, d in zip(stated.rows, default.rows, strict=True))  # fmt: skip
+
+
+def test_a_stated_zero_without_offset_keeps_friction_covered_and_narrows_it(tmp_path):
+    """A lone line's <F> interval carries an offset that one line cannot tell from
+    friction; a user who took the zero from a friction loop says so with --zero-offset,
+    and the interval becomes the model's own: narrower, still about the friction."""
+    r = simulate([0.6, 1.5, 3.0, 4.5], [8.0, 15.0, 25.0, 40.0], seed=11)
+    lines = tmp_path / "lines"
+    lines.mkdir()
+    for i, f in enumerate(r.force_nN):
+        write_trace_csv(lines / f"t{i}.csv", r.x_nm, f)
+    tables = {}
+    for name, args in (("prior", []), ("zero", ["--zero-offset"])):
+        out = tmp_path / f"{name}.csv"
+        res = runner.invoke(app, ["infer", str(lines), "--out", str(out), *args])
+        assert res.exit_code == 0, res.output
+        tables[name] = {row["trace"]: row for row in csv.DictReader(open(out))}
+    assert "stated zero without offset" in res.stderr
+    truth = {f"t{i}": float(f.mean()) for i, f in enumerate(r.force_nN)}
+    for key, prior in tables["prior"].items():
+        zero = tables["zero"][key]
+        assert zero["zero_offset"] == "True" and not prior.get("zero_offset")
+        lo, hi = float(zero["F_mean_nN_lo95"]), float(zero["F_mean_nN_hi95"])
+        wide = float(prior["F_mean_nN_hi95"]) - float(prior["F_mean_nN_lo95"])
+        # the offset term was most of the width on these clean lines
+        assert lo <= truth[key] <= hi and hi - lo < 0.5 * wide, (key, lo, hi, wide)
+        # the other targets' intervals do not depend on the statement
+        assert zero["U0_eV_lo95"] == prior["U0_eV_lo95"]
+    res = runner.invoke(app, ["infer", str(lines), "--out", str(tmp_path / "x.csv"),
+                              "--zero-offset", "--model", "classical"])  # fmt: skip
+    assert res.exit_code == 2 and "--zero-offset" in res.stderr
+    assert not (tmp_path / "x.csv").exists()

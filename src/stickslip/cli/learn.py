@@ -34,7 +34,7 @@ from stickslip.estimators.base import Estimator
 from stickslip.estimators.line.ensemble import ANY_CONTACT
 from stickslip.estimators.line.streaming import StreamSettings
 from stickslip.estimators.line.training import LineTrainConfig, family_settings
-from stickslip.estimators.load import load_estimator, state_contact
+from stickslip.estimators.load import load_estimator, state_contact, state_zero_offset
 from stickslip.estimators.table import has_estimate
 from stickslip.estimators.window.features import FeatureError
 from stickslip.estimators.window.modelfile import ModelFileError
@@ -58,11 +58,16 @@ CONTACT_HELP = ("The contact, if you know it: 'any' (default: the calibration co
                 "asperity on a crystal without modulation or defects along the line: "
                 "narrower U0 intervals). The line model only.")
 TEMPERATURE_HELP = "Temperature in K (wins over the file's; default: the estimator's, 296)."
+ZERO_OFFSET_HELP = ("State that the lateral force's zero carries no offset (taken from a "
+                    "friction loop or a calibration): a lone line's <F> interval is then the "
+                    "model's own, without the offset one line cannot tell from friction. The "
+                    "line model only; trace/retrace pairs cancel the offset anyway.")
 
 
-def _estimator(spec: str | None, contact: str = ANY_CONTACT) -> Estimator:
+def _estimator(spec: str | None, contact: str = ANY_CONTACT,
+               zero_offset: bool = False) -> Estimator:  # fmt: skip
     try:
-        return state_contact(load_estimator(spec), contact)
+        return state_zero_offset(state_contact(load_estimator(spec), contact), zero_offset)
     except (ModelFileError, ValueError) as e:
         usage_error(str(e))
 
@@ -163,6 +168,7 @@ def infer_cmd(
     report: Path | None = typer.Option(None, "--report", help=REPORT_HELP),
     split_changes: bool = typer.Option(False, "--split-changes", help=SPLIT_HELP),
     contact: str = typer.Option(ANY_CONTACT, "--contact", help=CONTACT_HELP),
+    zero_offset: bool = typer.Option(False, "--zero-offset", help=ZERO_OFFSET_HELP),
 ) -> None:
     """Estimate <F>, U0, K and eta of every trace, with any estimator.
 
@@ -173,9 +179,10 @@ def infer_cmd(
     reason for map lines); the others are processed (exit code 1).
     """
     code = run_estimation(
-        _estimator(model, contact), traces, out, lattice=lattice, velocity=velocity,
-        temperature=temperature, calibration=calibration, lines_per_load=lines_per_load,
-        loads=loads, plots=plots, classical=classical, check=check, report=report,
+        _estimator(model, contact, zero_offset), traces, out, lattice=lattice,
+        velocity=velocity, temperature=temperature, calibration=calibration,
+        lines_per_load=lines_per_load, loads=loads, plots=plots, classical=classical,
+        check=check, report=report,
         split_changes=split_changes,
     )  # fmt: skip
     raise typer.Exit(code)
@@ -228,6 +235,7 @@ def evaluate_cmd(
     temperature: float | None = typer.Option(None, "--temperature", help=TEMPERATURE_HELP),
     calibration: float | None = typer.Option(None, "--calibration", help=CALIBRATION_HELP),
     contact: str = typer.Option(ANY_CONTACT, "--contact", help=CONTACT_HELP),
+    zero_offset: bool = typer.Option(False, "--zero-offset", help=ZERO_OFFSET_HELP),
 ) -> None:
     """Score any estimator on any labelled set: metrics.json, predictions, plots.
 
@@ -242,7 +250,7 @@ def evaluate_cmd(
     if out.exists() and not out.is_dir():
         usage_error(f"{out}: exists and is not a folder")
     _check_conditions(lattice, velocity, temperature)
-    est = _estimator(model, contact)
+    est = _estimator(model, contact, zero_offset)
     with progress_bar(inf.count_inputs(inputs), "read", "file") as bar:
         opts = reading_options(calibration, None, None, velocity_nm_per_s=velocity)
         found, errors = inf.read_inputs(inputs, opts, progress=bar)

@@ -71,6 +71,27 @@ def load_estimator(spec: str | os.PathLike | None = None) -> Estimator:
     return kind(payload, name)
 
 
+def state_zero_offset(estimator: Estimator, zero_offset: bool) -> Estimator:
+    """A copy of ``estimator`` told that the lateral force's zero carries no offset
+    (:attr:`LineEstimator.zero_offset`; False changes nothing).
+
+    Raises
+    ------
+    ValueError
+        One line: an estimator without an <F> interval that carries an offset term (only
+        the line model's does).
+    """
+    if not zero_offset:
+        return estimator
+    if not isinstance(estimator, LineEstimator):
+        raise ValueError(f"--zero-offset: the {estimator.name} estimator's <F> interval "
+                         "carries no offset term to drop; the line model's (the default) "
+                         "does")  # fmt: skip
+    stated = copy.copy(estimator)  # the caller's estimator keeps its own setting
+    stated.zero_offset = True
+    return stated
+
+
 def state_contact(estimator: Estimator, contact: str) -> Estimator:
     """A copy of ``estimator`` told the contact the user states
     (:data:`~stickslip.estimators.line.ensemble.CONTACTS`; ``"any"`` changes nothing).

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Sequence
+from dataclasses import replace
 from importlib import resources
 from typing import Any
 
@@ -85,6 +86,11 @@ class LineEstimator(TraceEstimator):
     #: the contact the user states (:data:`~stickslip.estimators.line.ensemble.CONTACTS`):
     #: which of the model's calibrations sizes the intervals
     contact = ANY_CONTACT
+    #: the user states that the lateral force's zero carries no offset (a zero taken
+    #: from a friction loop or a calibration): the single-line <F> interval is then the
+    #: model's own calibrated one, without the offset term that one line cannot tell
+    #: from friction (:mod:`stickslip.estimators.offsets`)
+    zero_offset = False
 
     def __init__(self, ensemble: LineEnsemble, source: str = "bundled",
                  embedding_reference: EmbeddingReference | None = None) -> None:  # fmt: skip
@@ -99,6 +105,7 @@ class LineEstimator(TraceEstimator):
 
     def describe(self) -> str:
         stated = "" if self.contact == ANY_CONTACT else f", stated contact: {self.contact}"
+        stated += ", stated zero without offset" if self.zero_offset else ""
         return (f"whole-line CNN ensemble of {len(self.ensemble.members)} with calibrated "
                 f"68/95 % intervals ({self.source}{stated})")  # fmt: skip
 
@@ -125,6 +132,8 @@ class LineEstimator(TraceEstimator):
                 np.array([conditions[i].velocity_nm_per_s for i in ok]),
                 np.array([conditions[i].temperature_K for i in ok]))  # fmt: skip
         ens = self.ensemble.for_contact(self.contact)
+        if self.zero_offset:  # the model's own <F> error: no offset term, and no factor
+            ens = replace(ens, offset=None, friction_factor=None)  # fitted for the sum
         ref = self.embedding_reference if self.domain_verdict else None
         if ref is None:
             pred, dist = predict_raw_lines(ens, *args[:4], temperature_K=args[4]), None
@@ -146,6 +155,8 @@ class LineEstimator(TraceEstimator):
                 row["domain_embedding"] = float(dist[j])
             if self.contact != ANY_CONTACT:  # which calibration sized the intervals
                 row["contact"] = self.contact
+            if self.zero_offset:
+                row["zero_offset"] = True
             row.update(zip(EVIDENCE_COLUMNS, map(float, pred.evidence[j]), strict=True))
             if pred.local_evidence is not None:
                 row[LOCAL_COLUMN] = float(pred.local_evidence[j])
