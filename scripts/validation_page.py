@@ -7,8 +7,8 @@ Reads ``classical_stress.json`` (``benchmarks/classical_stress.py --json``),
 --json``),
 ``map_pooling.json`` (``benchmarks/map_pooling.py``'s ``last_run.json``),
 ``contacts.json`` (``benchmarks/contacts.py --json``),
-``soft_contacts.json`` and ``soft_contacts_baseline.json``
-(``benchmarks/soft_contacts.py --json``) and
+``soft_contacts.json`` and ``soft_contacts_classical.json``
+(``benchmarks/soft_contacts.py [--model classical] --json``) and
 ``transcribed.json`` (figures of benchmarks that write no JSON yet, each transcribed with
 its command and date) from ``--data``; without ``--out`` the page goes to stdout. The
 docs build (mkdocs-gen-files, ``scripts/docs_pages.py``) calls :func:`page`. To refresh
