@@ -46,6 +46,7 @@ bench-learn: $(STAMP)
 	$(BIN)/python benchmarks/encoder_vs_mlp.py
 	$(BIN)/python benchmarks/soft_contacts.py
 	$(BIN)/python benchmarks/soft_contacts.py --model classical
+	$(BIN)/python benchmarks/noise_bias.py
 
 model: $(STAMP)
 	$(BIN)/python scripts/train_default_model.py

@@ -50,3 +50,26 @@ def log_noise_level(force_nN: np.ndarray) -> np.ndarray:
     """``ln(median |second difference| + 1e-4 nN)`` of each row: the line model's noise
     coordinate (its spread classes are defined on it)."""
     return np.log(np.median(abs_second_differences(force_nN), axis=-1) + 1e-4)
+
+
+#: Floor of :func:`log_noise_ratio`'s ratio: a noiseless simulated line reads about this.
+NOISE_RATIO_FLOOR = 1e-4
+
+
+def log_noise_ratio(force_nN: np.ndarray) -> np.ndarray:
+    """``ln(noise / std + 1e-4)`` of each row: the white noise (:func:`noise_nN`) over
+    the line's own standard deviation, a dimensionless measure of how noisy a line is
+    (the line model's location calibration reads it).
+
+    Parameters
+    ----------
+    force_nN : ndarray (..., P)
+
+    Returns
+    -------
+    ndarray (...,)
+    """
+    F = np.asarray(force_nN, float)
+    std = F.std(axis=-1)
+    ratio = np.divide(noise_nN(F), std, out=np.zeros_like(std), where=std > 0)
+    return np.log(ratio + NOISE_RATIO_FLOOR)

@@ -54,6 +54,7 @@ from stickslip.estimators.calibration import (
 )
 from stickslip.estimators.evidence import line_evidence, line_evidence_batch, local_evidence
 from stickslip.estimators.mapping import to_reference
+from stickslip.estimators.noise import log_noise_ratio
 from stickslip.estimators.offsets import (
     CompressionPrior,
     OffsetPrior,
@@ -386,7 +387,17 @@ ANY_CONTACT = "any"
 CONTACTS = (ANY_CONTACT, "ideal")
 #: The fields of :class:`LineEnsemble` that a spread calibration fits.
 CALIBRATION_STATE = ("scale", "exponent", "shape", "friction_factor", "evidence",
-                     "evidence_range")  # fmt: skip
+                     "evidence_range", "location", "location_range")  # fmt: skip
+#: What the location calibration reads of each line and target, in this order: the
+#: line's noise over its own std (:func:`~stickslip.estimators.noise.log_noise_ratio`),
+#: ln of the ensemble's raw spread and the ensemble's mean (standardised units).
+LOCATION_INPUTS = ("noise", "spread", "estimate")
+#: The targets whose mean the location calibration moves: the members read noisy lines
+#: stiff and their eta soft. U0's median error on the calibration lines is set mostly by
+#: the substrates and contacts of the training prior, which a line does not show, and a
+#: shift fitted there moved clean lines' U0 off (docs/explanation/calibration.md,
+#: "Where the estimate sits").
+LOCATED_TARGETS = ("log_K_ref", "log_eta")
 
 
 @dataclass
@@ -399,7 +410,9 @@ class LineEnsemble:
     (n_classes, n_targets); no ``exponent`` means 1 (a plain scale factor). ``shape``
     (n_targets, len(SHAPE_LEVELS)) holds the quantiles of ``|error| / calibrated std``
     on the calibration lines, from which :meth:`z_at` gives the half-width of an
-    interval at any level (a Gaussian's without it).
+    interval at any level (a Gaussian's without it). ``location`` moves the members'
+    mean before any of this: the median error the calibration lines leave given what a
+    line shows (:meth:`location_shift`).
     """
 
     members: list[LineCNN]
@@ -428,6 +441,13 @@ class LineEnsemble:
     #: (2, len(EVIDENCE)): the calibration lines' range of ``e``, to which a line's is
     #: clipped (no extrapolation beyond what the fit saw)
     evidence_range: np.ndarray | None = None
+    #: (n_targets, 1 + len(LOCATION_INPUTS)): the median error of the members' mean
+    #: (standardised units) on the calibration lines, ``c0 + c . u`` in what a line shows
+    #: (:data:`LOCATION_INPUTS`), taken off every mean (:meth:`location_shift`); None: 0
+    location: np.ndarray | None = None
+    #: (2, n_targets, len(LOCATION_INPUTS)): the calibration lines' range of ``u``, to
+    #: which a line's is clipped (no extrapolation beyond what the fit saw)
+    location_range: np.ndarray | None = None
     #: calibrations for a contact the user states (:data:`CONTACTS`), each the
     #: :data:`CALIBRATION_STATE` fields fitted on the calibration lines of such contacts
     #: only; the fields above are the calibration for any contact
@@ -465,6 +485,29 @@ class LineEnsemble:
             e = np.clip(e, self.evidence_range[0], self.evidence_range[1])
         b = np.asarray(self.evidence, float)
         return np.exp(b[:, 0][None, :] + e @ b[:, 1:].T)
+
+    @staticmethod
+    def location_inputs(noise: np.ndarray, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
+        """What the location calibration reads (:data:`LOCATION_INPUTS`), (B, n_targets,
+        3), from the lines' noise coordinate (B,) and the members' standardised mean and
+        raw spread (B, n_targets)."""
+        mean = np.asarray(mean, float)
+        noise = np.broadcast_to(np.asarray(noise, float)[:, None], mean.shape)
+        return np.stack([noise, np.log(np.asarray(sd, float)), mean], axis=-1)
+
+    def location_shift(self, noise: np.ndarray, mean: np.ndarray, sd: np.ndarray
+                       ) -> np.ndarray:  # fmt: skip
+        """What :attr:`location` takes off the members' standardised mean of lines with
+        noise coordinate ``noise`` (B,), mean and raw spread ``sd`` (B, n_targets); zeros
+        without a location calibration."""
+        mean = np.asarray(mean, float)
+        if self.location is None:
+            return np.zeros_like(mean)
+        u = self.location_inputs(noise, mean, sd)
+        if self.location_range is not None:
+            u = np.clip(u, self.location_range[0], self.location_range[1])
+        c = np.asarray(self.location, float)
+        return c[:, 0][None, :] + np.einsum("btk,tk->bt", u, c[:, 1:])
 
     def z_at(self, level: float) -> np.ndarray:
         """Half-width of the central interval at ``level`` in calibrated stds, per target
@@ -531,9 +574,13 @@ class LineEnsemble:
                 mu, lv, _ = m.heads(f, e)
                 means[k, sl] = mu.numpy()
                 variances[k, sl] = lv.exp().numpy()
+        mean = means.mean(axis=0)
         sd = np.sqrt(np.mean(variances, axis=0) + means.var(axis=0))
         scale = np.asarray(self.scale)
         exponent = np.ones_like(scale) if self.exponent is None else np.asarray(self.exponent)
+        if self.location is not None:
+            noise = log_noise_ratio(input_force_nN(X, self.spec))
+            mean = mean - self.location_shift(noise, mean, sd)
         if scale.ndim == 2:
             cls = self.line_classes(X, C)
             scale, exponent = scale[cls], exponent[cls]
@@ -541,7 +588,7 @@ class LineEnsemble:
             evidence = line_evidence_batch(input_force_nN(X, self.spec),
                                            self.spec.lattice_nm / self.spec.pixel_nm)  # fmt: skip
         factor = 1.0 if self.evidence is None else self.evidence_factor(evidence)
-        return means.mean(axis=0), scale * sd**exponent * factor
+        return mean, scale * sd**exponent * factor
 
     def predict(self, X: torch.Tensor, C: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         """Predictive mean and std in target units (``TARGETS``: F, ln U0', ln K', ln eta)."""

@@ -357,7 +357,10 @@ def calibrate_on_families(ens: LineEnsemble, clean: Dataset,
             continue
         # a shallow copy: calibrate() rebinds the fields it fits; the members are shared
         stated = copy.copy(ens)
-        calibrate(stated, subset_lines(cs, keep), Y[keep], ens.classes, power)
+        # the members' mean keeps the location fitted on every line: a stated contact
+        # sizes the intervals, it does not move the estimates
+        calibrate(stated, subset_lines(cs, keep), Y[keep], ens.classes, power,
+                  location=False)
         ens.contact_calibrations[name] = stated.calibration_state()
     return report
 

@@ -25,6 +25,9 @@ Layout (plain types and tensors, read with ``torch.load(weights_only=True)``)::
                         exp(b0 + b . e) on what the line shows (absent: 1)
     evidence_range      (2, n_evidence) the calibration lines' range of the evidence,
                         to which a line's is clipped
+    location            (n_targets, 1 + n_inputs) coefficients of the median error
+                        taken off the members' mean, c0 + c . u (absent: none)
+    location_range      (2, n_targets, n_inputs) the calibration lines' range of u
     train_config        LineTrainConfig as a dict
     dataset             description and fingerprint of the training data
     metrics             validation metrics recorded at training time

@@ -66,11 +66,13 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy import optimize, sparse
 from tqdm.auto import tqdm
 
 from stickslip.estimators.calibration import Z95
 from stickslip.estimators.evidence import line_evidence
 from stickslip.estimators.line.ensemble import (
+    LOCATED_TARGETS,
     N_EXPERT,
     SHAPE_LEVELS,
     TARGETS,
@@ -87,6 +89,7 @@ from stickslip.estimators.line.ensemble import (
 )
 from stickslip.estimators.line.streaming import LineBatches, StreamSettings, batch_loader
 from stickslip.estimators.mapping import MAX_PIXEL_RATIO, resample_mean
+from stickslip.estimators.noise import log_noise_ratio
 from stickslip.estimators.offsets import FRICTION_LEVELS, fit_friction_factor
 from stickslip.estimators.split import split_indices
 from stickslip.estimators.window.modelfile import TrainedModel
@@ -545,11 +548,62 @@ def class_fit(err_abs: np.ndarray, sd: np.ndarray, classes: np.ndarray, n_classe
     return scale, exponent
 
 
+def median_fit(r: np.ndarray, u: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Coefficients ``(c0, c)`` of the weighted median of ``r`` given ``u``: the linear
+    quantile regression at 0.5 (least weighted absolute error, the proper score of a
+    median; Koenker and Bassett 1978), solved exactly as a linear programme.
+
+    Parameters
+    ----------
+    r : ndarray (N,)
+    u : ndarray (N, k)
+    weights : ndarray (N,)
+
+    Returns
+    -------
+    ndarray (1 + k,)
+    """
+    X = np.column_stack([np.ones(r.size), u])
+    n, k = X.shape
+    w = weights / weights.sum()
+    # r = X c + p - q with p, q >= 0: minimise sum w (p + q) / 2
+    cost = np.concatenate([np.zeros(k), 0.5 * w, 0.5 * w])
+    eq = sparse.hstack([sparse.csr_matrix(X), sparse.eye(n), -sparse.eye(n)]).tocsr()
+    bounds = [(None, None)] * k + [(0.0, None)] * (2 * n)
+    res = optimize.linprog(cost, A_eq=eq, b_eq=r, bounds=bounds, method="highs")
+    if not res.success:  # degenerate inputs: a plain weighted median, no slopes
+        return np.concatenate([[_weighted_quantile(r, w, 0.5)], np.zeros(k - 1)])
+    return res.x[:k]
+
+
+def fit_location(ens: LineEnsemble, cs: ValidationSet, mu: np.ndarray, sd: np.ndarray,
+                 Y_std: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Fit ``ens.location`` (and its range) on calibration lines: per target of
+    :data:`~stickslip.estimators.line.ensemble.LOCATED_TARGETS`, the weighted median of
+    the members' error given what the line shows
+    (:data:`~stickslip.estimators.line.ensemble.LOCATION_INPUTS`; :func:`median_fit`),
+    one fit over every class of line (a class alone spans too little of the noise); the
+    other targets keep no shift. Returns the means with the shift taken off
+    (standardised units, as ``mu``)."""
+    noise = np.array([float(log_noise_ratio(f)) for f in cs.lines])
+    u = ens.location_inputs(noise, mu, sd)
+    coef = np.zeros((len(TARGETS), 1 + u.shape[2]))
+    for name in LOCATED_TARGETS:
+        j = TARGETS.index(name)
+        coef[j] = median_fit(mu[:, j] - Y_std[:, j], u[:, j], weights)
+    ens.location = coef
+    ens.location_range = np.array([u.min(axis=0), u.max(axis=0)])
+    return mu - ens.location_shift(noise, mu, sd)
+
+
 def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
               classes: SpreadClasses | None = None, power: bool = True,
-              evidence: bool = True):  # fmt: skip
-    """Fit the spread calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
-    :func:`line_targets` units): per class of line when ``classes`` is given (else one
+              evidence: bool = True, location: bool = True):  # fmt: skip
+    """Fit the calibration of ``ens`` on calibration lines (targets ``Y_cal`` in
+    :func:`line_targets` units). With ``location``, first the median error of the
+    members' mean given what the line shows (:func:`fit_location`), which every
+    prediction then takes off; without it, the model's location calibration is kept
+    as it is. Then the spread: per class of line when ``classes`` is given (else one
     class, strata weighing equally), :func:`class_fit`, then the standardised errors'
     quantiles (``ens.shape``); where the model has <F> offset or compression terms,
     also the factor those intervals take on the model's own half-width
@@ -560,20 +614,24 @@ def calibrate(ens: LineEnsemble, cs: ValidationSet, Y_cal: np.ndarray,
     every calibration line."""
     ens.scale, ens.exponent, ens.shape, ens.classes = np.ones(len(TARGETS)), None, None, classes
     ens.friction_factor = ens.evidence = ens.evidence_range = None
+    if location:
+        ens.location = ens.location_range = None
     mu, sd = predict_std_lines(ens, cs.lines, cs.C)
-    err = np.abs(mu - _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean,
-                                            ens.y_std).numpy())  # fmt: skip
+    Y_std = _standardise_friction(Y_cal, cs.observed_mean, ens.y_mean, ens.y_std).numpy()
+    per_class = classes is not None
+    # weighed as in the fits: lines equally within classes, strata equally without
+    w = np.ones(len(cs.lines)) if per_class else _stratum_weights(cs.strata)
     if classes is None:
         cls, n_classes = np.zeros(len(cs.lines), int), 1
     else:
         cls = classes.classify_lines(cs.lines, cs.C[:, 0].numpy().astype(float) + 1.0)
         n_classes = classes.n
+    if location:
+        mu = fit_location(ens, cs, mu, sd, Y_std, w)
+    err = np.abs(mu - Y_std)
     scale, exponent = class_fit(err, sd, cls, n_classes, cs.strata, power)
     std = scale[cls] * sd ** exponent[cls]
-    per_class = classes is not None
     ens.scale, ens.exponent = (scale, exponent) if per_class else (scale[0], exponent[0])
-    # weighed as in the fit: lines equally within classes, strata equally without
-    w = np.ones(cls.size) if per_class else _stratum_weights(cs.strata)
     if evidence:
         e = line_evidence(cs.lines, ens.spec.lattice_nm / ens.spec.pixel_nm)
         ens.evidence_range = np.array([e.min(axis=0), e.max(axis=0)])
