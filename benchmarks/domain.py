@@ -24,6 +24,9 @@ and the line model's throughput (:meth:`LineEstimator.predict` on ``--n-speed`` 
 with and without the verdict, timed alternately in the same sitting, and the machine.
 Sets are cached under ``--work`` (default build/domain, git-ignored).
 
+``--write-reference`` fits the line model's embedding reference and its contact probe
+(:func:`write_reference`) and writes them to ``src/stickslip/resources/line_domain.npz``.
+
 Usage: python benchmarks/domain.py [--seed 2] [--bench-seed 20261121] [--n 200]
        [--n-speed 5000] [--repeats 3] [--threads 2] [--work build/domain] [--skip-speed]
        [--speed-only] [--eta-confirm X]
@@ -192,7 +195,6 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
     prior's detector effects (:func:`~stickslip.estimators.line.training.training_effects`,
     a :data:`CLEAN_FRACTION` left clean), and those on a flat substrate one pristine line
     more, as training's pristine lines."""
-    from stickslip.estimators.line.training import TYPICAL_FRACTION, training_effects
     from stickslip.jobs.train import BundledRecipe
     from stickslip.simulators.randomised import RandomisedConfig, cached_randomised_set, lab_config
 
@@ -215,7 +217,18 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
                     lambda: _pt_lines(n_p, seed_p, ParameterRange().eta, LATTICE_NM))  # fmt: skip
     parts.append((X_NM, paper["force_nN"], np.full(n_p, LATTICE_NM), np.full(n_p, 60.0),
                   np.ones(n_p, bool), np.full(n_p, 296.0)))  # fmt: skip
-    rng = np.random.default_rng(REFERENCE_SEEDS["effects"])
+    return with_effects(parts, np.random.default_rng(REFERENCE_SEEDS["effects"]), "reference")
+
+
+def with_effects(parts: list[tuple], rng: np.random.Generator, source: str
+                 ) -> tuple[list[Trace], np.ndarray]:  # fmt: skip
+    """Every line of ``parts`` (each ``(x, F, lattice, velocity, flat, temperature)``,
+    per-line arrays but ``x``) as training recorded it: :data:`EFFECT_DRAWS` lines with
+    the training prior's detector effects (a :data:`CLEAN_FRACTION` left clean), the
+    line itself where ``flat`` (a pristine line), and :data:`FAMILY_DRAWS` lines with the
+    nuisance prior's effect families; with the index of the line each comes from."""
+    from stickslip.estimators.line.training import TYPICAL_FRACTION, training_effects
+
     effects = training_effects(TYPICAL_FRACTION)
     traces, owner = [], []
     first = 0
@@ -236,7 +249,7 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
                           said.temperature_K))  # fmt: skip
         for rows, forces, vel, temp in draws:
             for i, f in zip(rows, forces, strict=True):
-                traces.append(Trace(x, f, f"reference:{first + i}", "reference",
+                traces.append(Trace(x, f, f"{source}:{first + i}", source,
                                     {"lattice_nm": float(a[i]),
                                      "velocity_nm_per_s": float(vel[i]),
                                      "temperature_K": float(temp[i])}))  # fmt: skip
@@ -245,32 +258,166 @@ def reference_traces(work: Path) -> tuple[list[Trace], np.ndarray]:
     return traces, np.array(owner)
 
 
+#: Multi-asperity contact lines behind the contact probe: sets of
+#: :data:`PROBE_SET_SIZE` lines (:func:`~stickslip.simulators.contacts.contact_set`), each
+#: at recording and dynamics drawn from the training prior's ranges, on seeds
+#: ``PROBE_SEED + j`` used by nothing else (the calibration's contact lines: 5111 on, the
+#: contact benchmark's: 4401 on).
+PROBE_SEED = 7101
+PROBE_SETS = 24
+PROBE_SET_SIZE = 100
+#: (pixels, length in nm) of the probe's sets, in turn (cost grows with the length).
+PROBE_SCANS = ((512, 11.0), (256, 5.5), (1024, 11.0), (512, 5.5), (256, 11.0), (1024, 22.0))
+
+
+def probe_settings(j: int) -> PhysicalSettings:
+    """The recording and dynamics of the probe's contact set ``j``: temperature 250-350 K,
+    velocity 30-200 nm/s (log-uniform), damping 0.3-3x and mass 0.5-2x the preset's
+    (log-uniform), graphite or MoS2, and a scan of :data:`PROBE_SCANS`."""
+    rng = np.random.default_rng([PROBE_SEED, j])
+    px, length = PROBE_SCANS[j % len(PROBE_SCANS)]
+    return PhysicalSettings(
+        temperature_K=float(rng.uniform(250.0, 350.0)),
+        velocity_nm_per_s=float(_loguniform(rng, 30.0, 200.0, 1)[0]),
+        damping_per_s=1e7 * float(_loguniform(rng, 0.3, 3.0, 1)[0]),
+        mass_kg=1e-12 * float(_loguniform(rng, 0.5, 2.0, 1)[0]),
+        lattice_nm=(0.246, 0.316)[j % 2], pixels=px, length_nm=length,
+    )  # fmt: skip
+
+
+def probe_contacts(work: Path) -> list[dict[str, np.ndarray]]:
+    """The probe's multi-asperity sets (simulated once, cached under ``work``): per set
+    ``x_nm``, ``force_nN`` (Langevin, at the set's temperature), ``misfit`` (of the
+    effective PT fit to the T = 0 waveform) and the set's lattice, velocity and
+    temperature."""
+    from stickslip.simulators.contacts import contact_set
+
+    def make(j: int) -> dict[str, np.ndarray]:
+        s = probe_settings(j)
+        c = contact_set(PROBE_SET_SIZE, "multi", PROBE_SEED + j, s)
+        return {"x_nm": c.x_nm, "force_nN": c.force_nN,
+                "misfit": np.asarray(c.truth["misfit_fraction"], float),
+                "lattice_nm": np.float64(s.lattice_nm),
+                "velocity_nm_per_s": np.float64(s.velocity_nm_per_s),
+                "temperature_K": np.float64(s.temperature_K)}  # fmt: skip
+
+    return [_cached(work / f"probe_multi_{PROBE_SET_SIZE}_{PROBE_SEED + j}.npz",
+                    lambda j=j: make(j)) for j in range(PROBE_SETS)]  # fmt: skip
+
+
+def probe_points(work: Path) -> list[dict[str, np.ndarray]]:
+    """Single-point PT lines beside each of the probe's contact sets (cached under
+    ``work``): :data:`PROBE_SET_SIZE` lines at the set's recording and dynamics
+    (:func:`probe_settings`), (U0, K) uniform in the contact sets' box, so that the
+    conditions tell the probe nothing."""
+    from stickslip.simulators import contacts as ct
+
+    def make(j: int) -> dict[str, np.ndarray]:
+        s = probe_settings(j)
+        rng = np.random.default_rng([PROBE_SEED, j, 1])
+        U0, K = [], []
+        while len(U0) < PROBE_SET_SIZE:
+            u, k = rng.uniform(*ct.SET_U0_EV), rng.uniform(*ct.SET_K_N_M)
+            if ct.SET_ETA[0] <= float(eta_from(u, k, s.lattice_nm)) <= ct.SET_ETA[1]:
+                U0.append(u)
+                K.append(k)
+        res = simulate(np.array(U0), np.array(K), s, seed=PROBE_SEED * 100 + j)
+        return {"x_nm": np.asarray(res.x_nm, float), "force_nN": res.force_nN}
+
+    return [_cached(work / f"probe_points_{PROBE_SET_SIZE}_{PROBE_SEED + j}.npz",
+                    lambda j=j: make(j)) for j in range(PROBE_SETS)]  # fmt: skip
+
+
+#: Share of held-out single-point lines the contact probe may flag (its limit's level).
+PROBE_LEVEL = 0.99
+#: Misfits (of the effective PT to the T = 0 waveform) of the probe's two classes: no
+#: single PT describes a line above the first (several contacts); one describes it well
+#: below the second (a described contact, with the single-point lines). Lines between
+#: are left out of the fit.
+PROBE_MISFIT = (0.05, 0.01)
+
+
+def probe_traces(work: Path) -> tuple[list[Trace], np.ndarray, np.ndarray]:
+    """The probe's lines with the reference lines' effects (:func:`with_effects`): its
+    contact lines that no single PT describes (group 1) or that one describes well (2)
+    and its single-point lines (3), between them every kind at every setting; each
+    line's group and the clean line it comes from."""
+    parts, group = [], []
+    for d, pts in zip(probe_contacts(work), probe_points(work), strict=True):
+        several = d["misfit"] > PROBE_MISFIT[0]
+        described = d["misfit"] <= PROBE_MISFIT[1]
+        F = np.vstack([d["force_nN"][several | described], pts["force_nN"]])
+        n = F.shape[0]
+        parts.append((d["x_nm"], F, np.full(n, float(d["lattice_nm"])),
+                      np.full(n, float(d["velocity_nm_per_s"])), np.ones(n, bool),
+                      np.full(n, float(d["temperature_K"]))))  # fmt: skip
+        group.append(np.concatenate([np.where(several[several | described], 1, 2),
+                                     np.full(pts["force_nN"].shape[0], 3)]))  # fmt: skip
+    traces, owner = with_effects(parts, np.random.default_rng(PROBE_SEED), "probe")
+    return traces, np.concatenate(group)[owner], owner
+
+
+def _features(line, traces: list[Trace]) -> np.ndarray:
+    from stickslip.estimators.line.estimator import pooled_features
+
+    meta = [[t.meta[k] for t in traces] for k in ("lattice_nm", "velocity_nm_per_s",
+                                                  "temperature_K")]  # fmt: skip
+    return pooled_features(line.ensemble, [t.x_nm for t in traces],
+                           [t.force_nN for t in traces], *map(np.array, meta))[1]  # fmt: skip
+
+
 def write_reference(work: Path, out: Path, level: float = 0.995) -> None:
-    """Fit the bundled line model's :class:`EmbeddingReference` and write it to ``out``.
+    """Fit the bundled line model's :class:`EmbeddingReference` and its contact probe and
+    write them to ``out``.
 
     The moments come from the lines of 80 % of the reference trajectories, the limit
-    (the ``level`` quantile of the distance) from the other 20 %.
+    (the ``level`` quantile of the distance) from the other 20 %. The probe
+    (:class:`~stickslip.estimators.domain.ContactProbe`) is fitted on the same 80 % and
+    on 80 % of the probe's contact lines (:func:`probe_traces`; classes weighing
+    equally, and within the single-point class the reference lines and the described
+    contact lines), its penalty chosen on the other 20 %, its limit the
+    :data:`PROBE_LEVEL` quantile of the held-out reference lines.
     """
-    from stickslip.estimators.domain import EmbeddingReference
-    from stickslip.estimators.line.estimator import fingerprint, pooled_features
+    from stickslip.estimators.domain import ContactProbe, EmbeddingReference
+    from stickslip.estimators.line.estimator import fingerprint
     from stickslip.estimators.load import load_estimator
 
     line = load_estimator(None)
     traces, owner = reference_traces(work)
-    a = np.array([t.meta["lattice_nm"] for t in traces])
-    v = np.array([t.meta["velocity_nm_per_s"] for t in traces])
-    T = np.array([t.meta["temperature_K"] for t in traces])
-    _, feats = pooled_features(line.ensemble, [t.x_nm for t in traces],
-                               [t.force_nN for t in traces], a, v, T)  # fmt: skip
+    feats = _features(line, traces)
     held = np.random.default_rng(REFERENCE_SEEDS["effects"]).random(owner.max() + 1) < HOLD_OUT
     test = held[owner]
     ref = EmbeddingReference.fit(feats[:, ~test], fingerprint(line.ensemble), level=level)
     in_sample = ref.limit
     ref.set_limit(feats[:, test], level)
+    ptraces, group, powner = probe_traces(work)
+    pfeats = _features(line, ptraces)
+    pheld = np.random.default_rng(PROBE_SEED).random(powner.max() + 1) < HOLD_OUT
+    ptest = pheld[powner]
+    y = np.concatenate([np.zeros(test.size), (group == 1).astype(float)])
+    # the classes weigh equally; within the single-point class the reference lines, the
+    # described contact lines and the single-point lines at the contacts' settings
+    share = {1: 1.0, 2: 1.0 / 3.0, 3: 1.0 / 3.0}
+    w = np.concatenate([np.full(test.size, 1.0 / 3.0 / test.size),
+                        [share[g] / np.sum(group == g) for g in group]])  # fmt: skip
+    val = np.concatenate([test, ptest])
+    allf = np.concatenate([feats, pfeats], axis=1)
+    probe = ContactProbe.fit(allf, y, w, val)
+    probe.set_limit(feats[:, test], PROBE_LEVEL)
+    ref.probe = probe
     ref.save(out)
     print(f"embedding reference: {int((~test).sum())} lines fit the moments, {int(test.sum())} "
           f"held-out lines set the {level:.1%} limit {ref.limit:.3f} (in-sample "
           f"{in_sample:.3f}); written to {out} ({out.stat().st_size / 1024:.0f} KiB)")
+    flagged = probe.log_odds(pfeats[:, ptest]) > probe.limit
+    g = group[ptest]
+    print(f"contact probe: {len(ptraces)} probe lines ({int(np.sum(group == 1))} of contacts no "
+          f"single PT describes), penalty {probe.penalty:g}; held out, it flags "
+          + ", ".join(f"{flagged[g == k].mean():.3f} of {int(np.sum(g == k))} {name}"
+                      for k, name in ((1, "several-contact lines"),
+                                      (2, "described contact lines"),
+                                      (3, "single-point lines at their settings")))
+          + f" and {1 - PROBE_LEVEL:.3f} of the reference lines (its limit)")  # fmt: skip
 
 
 def family_traces(n: int, seed: int, work: Path) -> list[Trace]:
@@ -413,8 +560,9 @@ def main() -> None:
                         help="the line model's ETA_CONFIRM for this run (0: no stick-slip "
                              "check; default: the library's)")  # fmt: skip
     parser.add_argument("--write-reference", action="store_true",
-                        help="Fit the line model's embedding reference and write it to "
-                             "src/stickslip/resources/line_domain.npz, then stop.")  # fmt: skip
+                        help="Fit the line model's embedding reference and contact probe and "
+                             "write them to src/stickslip/resources/line_domain.npz, then "
+                             "stop.")  # fmt: skip
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     if args.write_reference:

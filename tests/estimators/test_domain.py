@@ -11,6 +11,7 @@ import pytest
 from stickslip.estimators import domain as D
 from stickslip.estimators.classical.estimator import ClassicalEstimator
 from stickslip.estimators.domain import (
+    ContactProbe,
     EmbeddingReference,
     assess,
     trace_checks,
@@ -221,6 +222,50 @@ def test_embedding_reference_flags_lines_far_from_its_reference(tmp_path):
     assert np.allclose(back.distance(new[:, :50]), ref.distance(new[:, :50]), rtol=1e-5)
 
 
+def test_contact_probe_learns_a_direction_and_flags_at_its_level(tmp_path):
+    # two members whose features differ by a rotation; the classes differ along one
+    # direction of small variance, buried in large nuisance variation
+    rng = np.random.default_rng(5)
+    n, D_ = 3000, 12
+    y = (rng.random(n) < 0.3).astype(float)
+    base = rng.standard_normal((n, D_)) * np.linspace(5.0, 0.5, D_)
+    base[:, -1] += 1.5 * y
+    rot = np.linalg.qr(rng.standard_normal((D_, D_)))[0]
+    feats = np.stack([base, base @ rot])
+    val = rng.random(n) < 0.3
+    w = np.where(y == 1, 1.0 / y.sum(), 1.0 / (n - y.sum()))
+    probe = ContactProbe.fit(feats, y, w, val)
+    assert probe.penalty in D.PROBE_PENALTIES
+    z = probe.log_odds(feats[:, val])
+    # the fitted log-odds rank the held-out lines as the true likelihood ratio does
+    from scipy.stats import spearmanr
+
+    assert spearmanr(z, base[val, -1]).statistic > 0.95
+    neg = feats[:, val & (y == 0)]
+    probe.set_limit(neg, 0.99)
+    assert np.mean(probe.ratio(neg) > 1.0) == pytest.approx(0.01, abs=0.005)
+    assert np.mean(probe.ratio(feats[:, val & (y == 1)]) > 1.0) > 0.3
+    # saved with the reference it belongs to, and read back the same
+    ref = EmbeddingReference.fit(feats[:, ~val], "abc")
+    ref.probe = probe
+    back = EmbeddingReference.load(ref.save(tmp_path / "ref.npz"))
+    np.testing.assert_allclose(back.probe.log_odds(feats[:, :50]), probe.log_odds(feats[:, :50]),
+                               rtol=1e-4, atol=1e-4)
+    assert back.probe.limit == probe.limit and back.probe.level == 0.99
+    # a reference written without a probe reads back without one
+    ref.probe = None
+    assert EmbeddingReference.load(ref.save(tmp_path / "bare.npz")).probe is None
+
+
+def test_the_contact_probe_counts_when_a_row_has_one():
+    r = judge(sawtooth(), {**row(), "domain_contacts": 3.0})
+    assert r["in_domain"] is False
+    assert r["domain_score"] == pytest.approx(3.0)
+    assert r["domain_reason"].endswith("more than one contact")
+    assert "3x the limit" in r["domain_reason"]
+    assert judge(sawtooth(), {**row(), "domain_contacts": 0.2})["in_domain"] is True
+
+
 def test_embedding_distance_is_the_projection_and_residual_it_documents():
     rng = np.random.default_rng(3)
     # fewer lines than features: a residual outside the components
@@ -407,3 +452,29 @@ def test_a_step_of_the_force_level_is_a_change_and_a_smooth_drift_is_not():
     u = X / X[-1]
     drift = judge(base + 0.8 * (3.0 * u**2 - 2.0 * u**3))
     assert drift["change_nm"] is None, drift["domain_reason"]
+
+
+@pytest.mark.slow
+def test_the_bundled_contact_probe_flags_contacts_no_single_pt_describes():
+    # multi-asperity lines at the paper preset (seed 4471, used by nothing else): the
+    # bundled probe puts out most of those whose T = 0 waveform no single PT describes,
+    # and none of those one describes within 1 %
+    from stickslip.estimators.load import load_estimator
+    from stickslip.simulators.contacts import contact_set
+
+    line = load_estimator(None)
+    assert line.embedding_reference.probe is not None, "bundled reference without its probe"
+    cs = contact_set(40, "multi", seed=4471)
+    traces = [Trace(cs.x_nm, f, f"multi:{i}", "contacts", {"lattice_nm": A})
+              for i, f in enumerate(cs.force_nN)]  # fmt: skip
+    rows = line.predict(traces).rows
+    probe = np.array([r.get("domain_contacts", np.nan) for r in rows])
+    misfit = np.asarray(cs.truth["misfit_fraction"])
+    several, described = misfit > 0.05, misfit <= 0.01
+    assert several.sum() >= 8 and described.sum() >= 15
+    # 10 of 16 and 0 of 22 when written (2026-11-30)
+    assert np.mean(probe[several] > 1.0) >= 0.4, probe[several]
+    assert np.mean(probe[described] > 1.0) <= 0.05, probe[described]
+    for r, p in zip(rows, probe, strict=True):
+        if p > 1.0:
+            assert r["in_domain"] is False and "more than one contact" in r["domain_reason"]

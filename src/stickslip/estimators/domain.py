@@ -69,7 +69,16 @@ and the row's estimate, so they hold for every estimator:
    distance of the line from the estimator's training lines in units of its limit
    (the whole-line CNN: Mahalanobis distance of its pooled features from those of
    simulated training-like lines, :class:`EmbeddingReference`) -- ``"line unlike the
-   training lines"``.
+   training lines"``;
+8. for estimators that give one: ``domain_contacts``, the odds that the line comes
+   from a contact of several asperities that no single PT describes, over the odds at
+   the probe's limit (the whole-line CNN: a logistic regression on the same pooled
+   features, fitted on simulated contact and single-point lines that carry the same
+   instrument effects, :class:`ContactProbe`) -- ``"the line's shape is no
+   single-point contact's ...: more than one contact"``. Such a contact's line at room
+   temperature is often a plain sawtooth (thermal activation skips the small slips of
+   its T = 0 waveform), so the spacing check does not see it, while its effective PT
+   is far from what the line's sawtooth would say.
 
 Out of domain, the numbers stay, but the intervals are widened (:func:`widen_rows`):
 every half-width ``*_lo68/_hi68/_lo95/_hi95`` about the estimate and every ``*_std``
@@ -126,7 +135,7 @@ CHECK_WIDEN_FACTORS = {"spacing": 5.0}
 MAX_SCORE = 1e3  # domain_score is capped here (an eta of 0 would give infinity)
 #: Checks in the order a tie is reported.
 CHECKS = ("slips", "direction", "spacing", "change", "eta_low", "eta_high", "stick_slip",
-          "embedding")  # fmt: skip
+          "contacts", "embedding")  # fmt: skip
 #: Estimates whose intervals :func:`widen_rows` widens: in nN units, and in V units for
 #: traces read without a calibration (:data:`~stickslip.estimators.table.VOLT_NAMES`).
 WIDENED = (*TARGETS, *(VOLT_NAMES[k] for k in TARGETS if k in VOLT_NAMES))
@@ -356,6 +365,8 @@ def check_ratios(checks: TraceChecks, lattice_nm: np.ndarray,
         flagged = np.array([bool(r.get("stick_slip_check")) for r in rows], bool)
         confirm = np.where(eta > 0, ETA_CONFIRM / eta, np.inf)
         out["stick_slip"] = np.where(flagged & np.isfinite(eta), confirm, nan)
+        probe = _column(rows, "domain_contacts")
+        out["contacts"] = np.where(np.isfinite(probe), probe, nan)
         emb = _column(rows, "domain_embedding")
         out["embedding"] = np.where(np.isfinite(emb), emb, nan)
     return out
@@ -397,6 +408,10 @@ def reason(check: str, checks: TraceChecks, i: int, lattice_nm: float,
     if check == "stick_slip":
         return (f"eta near the trained window's edge ({eta:.3g} < {ETA_CONFIRM:g}) and the "
                 f"slips do not invert to stick-slip (classical: {row['stick_slip_check']})")
+    if check == "contacts":
+        odds = _number(row, "domain_contacts")
+        return (f"the line's shape is no single-point contact's (contact probe {odds:.3g}x "
+                "the limit): more than one contact")  # fmt: skip
     emb = _number(row, "domain_embedding")
     return f"line unlike the training lines (embedding distance {emb:.3g}x the limit)"
 
@@ -527,6 +542,128 @@ def _blas_controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+#: Held-out weighted log loss picks the probe's L2 penalty among these (per feature,
+#: on standardised features).
+PROBE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1)
+
+
+def _logistic_fit(X: np.ndarray, y: np.ndarray, w: np.ndarray, penalty: float
+                  ) -> tuple[np.ndarray, float]:  # fmt: skip
+    """Weights and bias of an L2-penalised logistic regression (weighted mean log loss
+    plus ``penalty/2 |weights|^2``), by L-BFGS with the exact gradient."""
+    from scipy.optimize import minimize  # scipy's optimisers load in 0.3 s: only here
+
+    w = w / w.sum()
+    sign = 2.0 * y - 1.0
+
+    def loss(theta: np.ndarray) -> tuple[float, np.ndarray]:
+        z = sign * (X @ theta[:-1] + theta[-1])
+        value = float(np.sum(w * np.logaddexp(0.0, -z))) + 0.5 * penalty * theta[:-1] @ theta[:-1]
+        g = -w * sign * np.exp(-np.logaddexp(0.0, z))  # d loss / d (X theta + b)
+        return value, np.concatenate([X.T @ g + penalty * theta[:-1], [g.sum()]])
+
+    res = minimize(loss, np.zeros(X.shape[1] + 1), jac=True, method="L-BFGS-B")
+    return res.x[:-1], float(res.x[-1])
+
+
+def _log_loss(z: np.ndarray, y: np.ndarray, w: np.ndarray) -> float:
+    return float(np.sum(w * np.logaddexp(0.0, -(2.0 * y - 1.0) * z)) / w.sum())
+
+
+def _joined(features: np.ndarray) -> np.ndarray:
+    """Every member's features of N lines (M, N, D) side by side: (N, M D)."""
+    feats = np.asarray(features, float)
+    return feats.transpose(1, 0, 2).reshape(feats.shape[1], -1)
+
+
+@dataclass
+class ContactProbe:
+    """The log-odds that a line comes from a contact of several asperities that no
+    single Prandtl-Tomlinson slider describes, read linearly off a learned model's
+    pooled features: an L2-penalised logistic regression on every member's features,
+    standardised and side by side.
+
+    It is fitted on simulated lines with known answers (``benchmarks/domain.py
+    --write-reference``): multi-asperity contact lines whose T = 0 waveform no single PT
+    describes against training-like single-point lines and described contact lines,
+    every kind carrying the same instrument effects, so that the probe reads the
+    contact, not the instrument. A line is flagged where its log-odds exceed
+    :attr:`limit`, the ``level`` quantile of held-out single-point lines.
+
+    Attributes
+    ----------
+    mean, scale : ndarray (M D,)
+        The standardisation of the joined features.
+    weights : ndarray (M D,)
+    bias : float
+    limit : float
+        Log-odds above which a line is flagged.
+    level : float
+    penalty : float
+        The L2 penalty the fit chose.
+    """
+
+    mean: np.ndarray
+    scale: np.ndarray
+    weights: np.ndarray
+    bias: float
+    limit: float
+    level: float
+    penalty: float
+
+    @classmethod
+    def fit(cls, features: np.ndarray, labels: np.ndarray, weights: np.ndarray,
+            validation: np.ndarray, penalties: Sequence[float] = PROBE_PENALTIES
+            ) -> ContactProbe:  # fmt: skip
+        """Fit on lines' features (M, N, D) with ``labels`` (N,; 1: several contacts) and
+        ``weights`` (N,), fitted on all but the ``validation`` lines (N,; bool), with the
+        penalty that gives the least weighted log loss on those (which stay held out for
+        :meth:`set_limit`; :attr:`limit` is left at 0, even odds)."""
+        X = _joined(features)
+        y = np.asarray(labels, float)
+        w = np.asarray(weights, float)
+        val = np.asarray(validation, bool)
+        mean = X[~val].mean(axis=0)
+        scale = X[~val].std(axis=0) + 1e-9
+        Z = (X - mean) / scale
+        fits = {p: _logistic_fit(Z[~val], y[~val], w[~val], p) for p in penalties}
+        best = min(penalties, key=lambda p: _log_loss(Z[val] @ fits[p][0] + fits[p][1],
+                                                      y[val], w[val]))  # fmt: skip
+        return cls(mean, scale, *fits[best], 0.0, 0.5, float(best))
+
+    def log_odds(self, features: np.ndarray) -> np.ndarray:
+        """The log-odds of N lines' features (M, N, D)."""
+        return ((_joined(features) - self.mean) / self.scale) @ self.weights + self.bias
+
+    def set_limit(self, features: np.ndarray, level: float) -> None:
+        """Set :attr:`limit` to the ``level`` quantile of these (single-point) lines'
+        log-odds: about ``1 - level`` of lines like them are flagged."""
+        self.limit = float(np.quantile(self.log_odds(features), level))
+        self.level = float(level)
+
+    def ratio(self, features: np.ndarray) -> np.ndarray:
+        """The odds over the odds at :attr:`limit` (above 1: flagged), capped at e^50."""
+        return np.exp(np.minimum(self.log_odds(features) - self.limit, 50.0))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The probe as arrays (``probe_*``), for :meth:`EmbeddingReference.save`."""
+        return {"probe_mean": self.mean.astype(np.float32),
+                "probe_scale": self.scale.astype(np.float32),
+                "probe_weights": self.weights.astype(np.float32),
+                "probe_bias": np.float64(self.bias), "probe_limit": np.float64(self.limit),
+                "probe_level": np.float64(self.level),
+                "probe_penalty": np.float64(self.penalty)}  # fmt: skip
+
+    @classmethod
+    def from_arrays(cls, z: Mapping[str, np.ndarray]) -> ContactProbe | None:
+        """The probe saved by :meth:`arrays` (None where the file has none)."""
+        if "probe_weights" not in z:
+            return None
+        return cls(z["probe_mean"].astype(float), z["probe_scale"].astype(float),
+                   z["probe_weights"].astype(float), float(z["probe_bias"]),
+                   float(z["probe_limit"]), float(z["probe_level"]), float(z["probe_penalty"]))
+
+
 @dataclass
 class EmbeddingReference:
     """Where a learned model's pooled features lie on its training-like lines.
@@ -557,6 +694,8 @@ class EmbeddingReference:
     fingerprint : str
         Identifies the model the features come from (its weights): a reference made
         for another model is not used.
+    probe : ContactProbe or None
+        The contact probe read off the same features (the verdict's "contacts" check).
     """
 
     mean: np.ndarray
@@ -566,6 +705,7 @@ class EmbeddingReference:
     limit: float
     level: float
     fingerprint: str
+    probe: ContactProbe | None = None
     #: per member, ``L`` with ``L L^T`` the precision the distance reads (made on first use)
     _whitener: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -645,6 +785,7 @@ class EmbeddingReference:
             residual_variance=self.residual_variance.astype(np.float32),
             limit=np.float64(self.limit), level=np.float64(self.level),
             fingerprint=np.str_(self.fingerprint),
+            **(self.probe.arrays() if self.probe is not None else {}),
         )  # fmt: skip
         return path
 
@@ -653,4 +794,5 @@ class EmbeddingReference:
         with np.load(path) as z:
             return cls(z["mean"].astype(float), z["components"].astype(float),
                        z["variance"].astype(float), z["residual_variance"].astype(float),
-                       float(z["limit"]), float(z["level"]), str(z["fingerprint"]))  # fmt: skip
+                       float(z["limit"]), float(z["level"]), str(z["fingerprint"]),
+                       ContactProbe.from_arrays(z))  # fmt: skip

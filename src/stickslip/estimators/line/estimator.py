@@ -137,12 +137,14 @@ class LineEstimator(TraceEstimator):
         ref = self.embedding_reference if self.domain_verdict else None
         if ref is None:
             pred, dist = predict_raw_lines(ens, *args[:4], temperature_K=args[4]), None
+            probe = None
             if self.domain_verdict:
                 notes.append("no embedding reference for this model: the domain verdict "
                              "reads the traces and the estimates only")  # fmt: skip
         else:
             pred, feats = pooled_features(ens, *args)
             dist = ref.distance(feats)
+            probe = ref.probe.ratio(feats) if ref.probe is not None else None
         for j, i in enumerate(ok):
             row: dict[str, Any] = {k: float(pred.values[k][j]) for k in TARGETS}
             row.update({f"{k}_std": float(pred.std[k][j]) for k in TARGETS})
@@ -153,6 +155,8 @@ class LineEstimator(TraceEstimator):
                 row["F_model_std_nN"] = float(pred.F_model_std[j])
             if dist is not None:
                 row["domain_embedding"] = float(dist[j])
+            if probe is not None:
+                row["domain_contacts"] = float(probe[j])
             if self.contact != ANY_CONTACT:  # which calibration sized the intervals
                 row["contact"] = self.contact
             if self.zero_offset:
