@@ -348,7 +348,7 @@ def test_the_line_model_asks_the_slips_only_below_eta_confirm():
     "known shortfall: 15 of these 40 smooth lines (eta 0.5-0.95, U0 0.1-0.6 eV) stay in "
     "domain; the bundled line model reads them as eta 1.5-2.5 and the classical "
     "estimator inverts their steep continuous falls as slips (eta 1.1-2.5), so neither "
-    "check 5 nor 6 refuses them (benchmarks/domain.py --seed 2: 0.375 of smooth lines)"))
+    "check 5 nor 6 refuses them (benchmarks/domain.py --seed 2: 0.360 of smooth lines)"))
 def test_smooth_sliding_comes_out_of_domain_and_clean_stick_slip_stays_in():
     """Held-out simulations (seed 41, not the tuning seed): paper-preset lines with eta
     0.2-0.95 (smooth sliding) and, in the training box, 1.5-40 (stick-slip), 296 K,
