@@ -615,10 +615,10 @@ class ContactProbe:
     def fit(cls, features: np.ndarray, labels: np.ndarray, weights: np.ndarray,
             validation: np.ndarray, penalties: Sequence[float] = PROBE_PENALTIES
             ) -> ContactProbe:  # fmt: skip
-        """Fit on lines' features (M, N, D) with ``labels`` (N,; 1: several contacts) and
-        ``weights`` (N,), fitted on all but the ``validation`` lines (N,; bool), with the
-        penalty that gives the least weighted log loss on those (which stay held out for
-        :meth:`set_limit`; :attr:`limit` is left at 0, even odds)."""
+        """Fit on lines' features (M, N, D), ``labels`` (N,; 1: several contacts) and
+        ``weights`` (N,), leaving out the ``validation`` lines (N,; bool): the penalty is
+        the one of least weighted log loss on them, and they stay held out for
+        :meth:`set_limit` (:attr:`limit` is left at 0, even odds)."""
         X = _joined(features)
         y = np.asarray(labels, float)
         w = np.asarray(weights, float)
