@@ -547,6 +547,11 @@ def _blas_controller() -> ThreadpoolController:
 PROBE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1)
 
 
+def _log_loss(z: np.ndarray, y: np.ndarray, w: np.ndarray) -> float:
+    """Weighted mean log loss of log-odds ``z`` for labels ``y`` (0 or 1)."""
+    return float(np.sum(w * np.logaddexp(0.0, -(2.0 * y - 1.0) * z)) / w.sum())
+
+
 def _logistic_fit(X: np.ndarray, y: np.ndarray, w: np.ndarray, penalty: float
                   ) -> tuple[np.ndarray, float]:  # fmt: skip
     """Weights and bias of an L2-penalised logistic regression (weighted mean log loss
@@ -557,17 +562,13 @@ def _logistic_fit(X: np.ndarray, y: np.ndarray, w: np.ndarray, penalty: float
     sign = 2.0 * y - 1.0
 
     def loss(theta: np.ndarray) -> tuple[float, np.ndarray]:
-        z = sign * (X @ theta[:-1] + theta[-1])
-        value = float(np.sum(w * np.logaddexp(0.0, -z))) + 0.5 * penalty * theta[:-1] @ theta[:-1]
-        g = -w * sign * np.exp(-np.logaddexp(0.0, z))  # d loss / d (X theta + b)
+        s = X @ theta[:-1] + theta[-1]
+        value = _log_loss(s, y, w) + 0.5 * penalty * theta[:-1] @ theta[:-1]
+        g = -w * sign * np.exp(-np.logaddexp(0.0, sign * s))  # d loss / d s
         return value, np.concatenate([X.T @ g + penalty * theta[:-1], [g.sum()]])
 
     res = minimize(loss, np.zeros(X.shape[1] + 1), jac=True, method="L-BFGS-B")
     return res.x[:-1], float(res.x[-1])
-
-
-def _log_loss(z: np.ndarray, y: np.ndarray, w: np.ndarray) -> float:
-    return float(np.sum(w * np.logaddexp(0.0, -(2.0 * y - 1.0) * z)) / w.sum())
 
 
 def _joined(features: np.ndarray) -> np.ndarray:
