@@ -19,7 +19,7 @@ change is located within 0.5 nm of the truth among the lines flagged with one.
 Seeds: ``--seed`` (default 4401; 4401-4419 are this benchmark's, used nowhere else;
 the calibration's contact lines are drawn on 5111 and after, the verdict's contact
 probe's on 7101-7124). The verdict and the calibration were developed on seeds
-4401-4402; 4403-4408, 4411-4414 were scored once before. Report other seeds.
+4401-4402; 4403-4408, 4411-4416 were scored once before. Report other seeds.
 
     python benchmarks/contacts.py [--n 120] [--seed 4401] [--work build/contacts] [--json F]
 """

@@ -311,7 +311,7 @@ def probe_points(work: Path) -> list[dict[str, np.ndarray]]:
     """Single-point PT lines beside each of the probe's contact sets (cached under
     ``work``): :data:`PROBE_SET_SIZE` lines at the set's recording and dynamics
     (:func:`probe_settings`), (U0, K) uniform in the contact sets' box, so that the
-    conditions tell the probe nothing."""
+    conditions tell the probe nothing; ``x_nm``, ``force_nN``, ``U0_eV``, ``K_N_m``."""
     from stickslip.simulators import contacts as ct
 
     def make(j: int) -> dict[str, np.ndarray]:
@@ -358,92 +358,6 @@ def probe_traces(work: Path) -> tuple[list[Trace], np.ndarray, np.ndarray]:
                                      np.full(pts["force_nN"].shape[0], 3)]))  # fmt: skip
     traces, owner = with_effects(parts, np.random.default_rng(PROBE_SEED), "probe")
     return traces, np.concatenate(group)[owner], owner
-
-
-def widening_traces(work: Path, held: np.ndarray
-                    ) -> tuple[list[Trace], dict[str, np.ndarray]]:  # fmt: skip
-    """The probe's lines it was not fitted on, with fresh effects (:func:`with_effects`):
-    the held-out lines of :func:`probe_traces` (``held``, by the clean line they come
-    from), and every contact line between its two classes (misfit 1-5 %); with each
-    line's truths (``U0_eV``, ``K_N_m``: the effective PT of a contact line) and
-    ``group`` (1: no single PT describes it, 2: one does, misfit at most 1 %, 3: a
-    single-point line, 4: misfit 1-5 %)."""
-    parts, truths, first = [], [], 0
-    for d, pts in zip(probe_contacts(work), probe_points(work), strict=True):
-        used = (d["misfit"] > PROBE_MISFIT[0]) | (d["misfit"] <= PROBE_MISFIT[1])
-        n_used, n_pts = int(used.sum()), pts["force_nN"].shape[0]
-        h = held[first:first + n_used + n_pts]
-        first += n_used + n_pts
-        multi = ~used
-        multi[used] = h[:n_used]
-        keep = h[n_used:]
-        F = np.vstack([d["force_nN"][multi], pts["force_nN"][keep]])
-        mis = d["misfit"][multi]
-        group = np.where(mis > PROBE_MISFIT[0], 1, np.where(mis <= PROBE_MISFIT[1], 2, 4))
-        truths.append({"group": np.concatenate([group, np.full(int(keep.sum()), 3)]),
-                       **{k: np.concatenate([d[k][multi], pts[k][keep]])
-                          for k in ("U0_eV", "K_N_m")}})  # fmt: skip
-        n = F.shape[0]
-        parts.append((d["x_nm"], F, np.full(n, float(d["lattice_nm"])),
-                      np.full(n, float(d["velocity_nm_per_s"])), np.ones(n, bool),
-                      np.full(n, float(d["temperature_K"]))))  # fmt: skip
-    traces, owner = with_effects(parts, np.random.default_rng(PROBE_SEED + 1), "widening")
-    return traces, {k: np.concatenate([t[k] for t in truths])[owner] for k in truths[0]}
-
-
-#: The groups of :func:`widening_traces`, as printed.
-WIDENING_GROUPS = {1: "several contacts", 2: "described (misfit <= 1 %)",
-                   4: "described (misfit 1-5 %)", 3: "single-point"}  # fmt: skip
-
-
-def fit_probe_widening(line, traces: list[Trace], truth: dict[str, np.ndarray]) -> None:
-    """Fit the widening of ``line``'s embedding reference's probe
-    (:func:`~stickslip.estimators.domain.fit_widening`) on ``traces`` with these truths
-    (:func:`widening_traces`), from the rows the model gives them in domain (groups 1-3,
-    the classes the probe tells apart, at their natural counts), and print
-    what it chose and, per group of lines, the 95 % coverage and median relative
-    half-width in domain before and after (in sample)."""
-    from stickslip.estimators.domain import PROBE_WIDENED, fit_widening
-
-    probe = line.embedding_reference.probe
-    probe.widen_at, probe.widen_by = np.zeros(0), np.ones((len(PROBE_WIDENED), 0))
-    rows = line.predict(traces).rows
-    ind = np.array([domain_verdict(r) is True for r in rows])
-    col = {k: np.array([float(r.get(k, np.nan) or np.nan) for r in rows])
-           for k in ("domain_contacts", *(f"{t}{b}" for t in PROBE_WIDENED
-                                          for b in ("", "_lo95", "_hi95")))}  # fmt: skip
-    x = np.log(col["domain_contacts"])
-    # fitted on the classes the probe tells apart: with the lines between them (misfit
-    # 1-5 %, whose K errors its odds hardly see) the fit widened the K interval of 0.83
-    # of the single-point lines by more than 1.1x, an inflation of every line
-    fit = ind & (truth["group"] != 4)
-    by = []
-    for k in PROBE_WIDENED:
-        knots, f = fit_widening(x[fit], col[k][fit], col[f"{k}_lo95"][fit],
-                                col[f"{k}_hi95"][fit], truth[k][fit],
-                                np.ones(int(fit.sum())))  # fmt: skip
-        by.append(f)
-        print(f"probe widening of {k} at log-odds over the limit "
-              + ", ".join(f"{a:.2f}: {b:.2f}x" for a, b in zip(knots, f, strict=True)))
-    probe.widen_at, probe.widen_by = knots, np.array(by)
-    print(f"  fitted on {int(fit.sum())} of {len(rows)} held-out probe lines (in domain, "
-          "misfit 1-5 % left out); "
-          "in sample, 95 % coverage and median relative half-width before -> after:")
-    factors = probe.widening(col["domain_contacts"])
-    for g, name in WIDENING_GROUPS.items():
-        sel = ind & (truth["group"] == g)
-        parts = []
-        for k in PROBE_WIDENED:
-            m, lo, hi, t = (v[sel] for v in (col[k], col[f"{k}_lo95"], col[f"{k}_hi95"],
-                                               truth[k]))  # fmt: skip
-            f = factors[k][sel]
-            lo2, hi2 = m * (lo / m) ** f, m * (hi / m) ** f
-            parts.append(f"{k} {np.mean((t >= lo) & (t <= hi)):.3f} -> "
-                         f"{np.mean((t >= lo2) & (t <= hi2)):.3f}, "
-                         f"+-{np.median((hi - lo) / (2 * m)):.1%} -> "
-                         f"+-{np.median((hi2 - lo2) / (2 * m)):.1%}")
-        print(f"  {name:26s} {int(sel.sum()):5d} in domain: " + "; ".join(parts)
-              + f"; K widened > 1.1x: {np.mean(factors['K_N_m'][sel] > 1.1):.3f}")
 
 
 def _features(line, traces: list[Trace]) -> np.ndarray:
@@ -494,11 +408,6 @@ def write_reference(work: Path, out: Path, level: float = 0.995) -> None:
     probe = ContactProbe.fit(allf, y, w, val)
     probe.set_limit(feats[:, test], PROBE_LEVEL)
     ref.probe = probe
-    line.embedding_reference = ref
-    fit_probe_widening(line, *widening_traces(work, pheld))
-    wide = probe.widening(probe.ratio(feats[:, test]))["K_N_m"]
-    print(f"  held-out reference lines: K widened > 1.1x {np.mean(wide > 1.1):.3f}, "
-          f"> 1.5x {np.mean(wide > 1.5):.3f}")
     ref.save(out)
     print(f"embedding reference: {int((~test).sum())} lines fit the moments, {int(test.sum())} "
           f"held-out lines set the {level:.1%} limit {ref.limit:.3f} (in-sample "

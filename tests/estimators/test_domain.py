@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import json
 from importlib import resources
 
@@ -267,57 +266,6 @@ def test_the_contact_probe_counts_when_a_row_has_one():
     assert judge(sawtooth(), {**row(), "domain_contacts": 0.2})["in_domain"] is True
 
 
-def test_probe_widening_sizes_intervals_by_their_score_where_the_odds_say_so(tmp_path):
-    # log errors of sd 0.1 below the odds' midpoint, growing to 0.4 at the limit; every
-    # interval claims sd 0.1 (a 95 % half-width of 0.196)
-    rng = np.random.default_rng(11)
-    n = 40000
-    x = rng.uniform(-8.0, 0.0, n)
-    sd = 0.1 * np.where(x < -4.0, 1.0, 1.0 + 3.0 * (x + 4.0) / 4.0)
-    m = np.exp(rng.normal(0.0, 0.3, n))
-    truth = m * np.exp(rng.standard_normal(n) * sd)
-    half = 1.96 * 0.1
-    knots, f = D.fit_widening(x, m, m * np.exp(-half), m * np.exp(half), truth, np.ones(n))
-    assert np.all(np.diff(f) >= 0) and f[0] >= 1.0 and f[-1] <= D.PROBE_WIDEN_MAX
-    assert np.all(np.diff(knots) > 0) and knots[0] > -8.0 and knots[-1] < 0.0
-    # where the claim holds nothing widens; elsewhere the factor the bin's errors need
-    need = np.interp(knots, [-8.0, -4.0, 0.0], [1.0, 1.0, 4.0])
-    assert f[knots < -4.5] == pytest.approx(1.0, abs=0.08)
-    np.testing.assert_allclose(f[knots > -3.0], need[knots > -3.0], rtol=0.15)
-    # widened by it, each bin's 95 % intervals cover about 95 %
-    probe = ContactProbe(np.zeros(1), np.ones(1), np.zeros(1), 0.0, 0.0, 0.99, 0.01)
-    probe.widen_at, probe.widen_by = knots, np.vstack([np.ones_like(f), f])
-    got = probe.widening(np.exp(x))
-    assert np.all(got["U0_eV"] == 1.0)
-    cover = np.abs(np.log(truth / m)) <= half * got["K_N_m"]
-    for lo_ in (-8.0, -6.0, -4.0, -2.0):
-        sel = (x >= lo_) & (x < lo_ + 2.0)
-        assert 0.92 <= cover[sel].mean() <= 0.985, lo_
-    # above the limit (out of domain, widened as such) and where no odds: no widening
-    assert np.all(probe.widening(np.array([2.0, np.nan]))["K_N_m"] == 1.0)
-    # the widening is saved with the probe
-    ref = EmbeddingReference.fit(rng.standard_normal((1, 50, 1)), "abc")
-    ref.probe = probe
-    back = EmbeddingReference.load(ref.save(tmp_path / "ref.npz")).probe
-    np.testing.assert_array_equal(back.widen_at, knots)
-    np.testing.assert_array_equal(back.widen_by[1], f)
-
-
-def test_widen_column_widens_each_row_by_its_own_factor():
-    rows = [{"K_N_m": 2.0, "K_N_m_lo95": 1.0, "K_N_m_hi95": 4.0, "K_N_m_lo68": 1.5,
-             "K_N_m_hi68": 2.5, "K_N_m_std": 0.5} for _ in range(2)]  # fmt: skip
-    D.widen_column(rows, "K_N_m", np.array([1.0, 2.0]))
-    assert rows[0]["K_N_m_lo95"] == 1.0 and rows[0]["K_N_m_hi95"] == 4.0
-    assert rows[1]["K_N_m_lo95"] == pytest.approx(0.5) and rows[1]["K_N_m_hi95"] == 8.0
-    assert rows[1]["K_N_m_std"] > rows[0]["K_N_m_std"]
-    # one factor for every row is widen_rows' widening of that column
-    one = [dict(rows[0])]
-    D.widen_rows(one, 3.0)
-    two = [dict(rows[0])]
-    D.widen_column(two, "K_N_m", np.array([3.0]))
-    assert one[0]["K_N_m_lo95"] == two[0]["K_N_m_lo95"]
-
-
 def test_embedding_distance_is_the_projection_and_residual_it_documents():
     rng = np.random.default_rng(3)
     # fewer lines than features: a residual outside the components
@@ -530,22 +478,3 @@ def test_the_bundled_contact_probe_flags_contacts_no_single_pt_describes():
     for r, p in zip(rows, probe, strict=True):
         if p > 1.0:
             assert r["in_domain"] is False and "more than one contact" in r["domain_reason"]
-    # below its limit the probe's odds widen U0's and K's intervals, by a factor that
-    # never falls as the odds grow, and nothing else: the same rows without the widening
-    # are these rows narrowed by it, with the same verdict and the same eta interval
-    pr = line.embedding_reference.probe
-    assert pr.widen_at.size and np.all(np.diff(pr.widen_at) > 0)
-    assert np.all(pr.widen_by >= 1.0) and np.all(np.diff(pr.widen_by, axis=1) >= 0)
-    bare = copy.copy(line)
-    bare.embedding_reference = copy.deepcopy(line.embedding_reference)
-    bare.embedding_reference.probe.widen_at = np.zeros(0)
-    plain = bare.predict(traces).rows
-    factors = pr.widening(probe)
-    for j, (r, p) in enumerate(zip(rows, plain, strict=True)):
-        assert r["in_domain"] == p["in_domain"] and r["eta_hi95"] == p["eta_hi95"]
-        if not r["in_domain"]:
-            continue
-        for k in ("U0_eV", "K_N_m"):
-            assert np.log(r[f"{k}_hi95"] / r[k]) == pytest.approx(
-                factors[k][j] * np.log(p[f"{k}_hi95"] / p[k]), rel=1e-6)
-    assert np.max(factors["K_N_m"][probe <= 1.0]) > 1.0  # some rows are widened

@@ -2,8 +2,7 @@
 lines whose spread the line model calibrates separately.
 
 - :func:`gaussian_z`, :data:`Z68`, :data:`Z95`: a Gaussian's central half-widths;
-  :func:`lognormal_std`: the std of a log-normal interval; :func:`interval_score`: the
-  proper score of an interval;
+  :func:`lognormal_std`: the std of a log-normal interval;
 - :data:`SHAPE_LEVELS`: the levels at which a calibration stores its standardised
   errors' quantiles;
 - :class:`SpreadClasses`: classes of lines read off the line itself (quiet or noisy,
@@ -36,16 +35,6 @@ def gaussian_z(level: float) -> float:
 
 #: Two-sided 68 % and 95 % Gaussian quantiles: the half-widths of those intervals in stds.
 Z68, Z95 = gaussian_z(0.68), gaussian_z(0.95)
-
-
-def interval_score(y: np.ndarray, lo: np.ndarray, hi: np.ndarray, alpha: float) -> np.ndarray:
-    """The interval score of central ``1 - alpha`` intervals ``[lo, hi]`` for truths ``y``
-    (Gneiting and Raftery 2007; Winkler 1972): the width, plus ``2 / alpha`` times how far
-    the truth falls outside. A proper scoring rule: lower is better, and it is least in
-    expectation for the true quantiles, so it rewards intervals that are as narrow as
-    the data allow and no narrower."""
-    y, lo, hi = (np.asarray(v, float) for v in (y, lo, hi))
-    return (hi - lo) + (2.0 / alpha) * (np.maximum(lo - y, 0.0) + np.maximum(y - hi, 0.0))
 
 
 def lognormal_std(median, sigma_ln):

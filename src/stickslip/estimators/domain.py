@@ -78,13 +78,7 @@ and the row's estimate, so they hold for every estimator:
    single-point contact's ...: more than one contact"``. Such a contact's line at room
    temperature is often a plain sawtooth (thermal activation skips the small slips of
    its T = 0 waveform), so the spacing check does not see it, while its effective PT
-   is far from what the line's sawtooth would say. Below its limit the probe's odds
-   still say something: the estimator widens the U0 and K intervals of every row by a
-   factor that grows with them (:meth:`ContactProbe.widening`), fitted on held-out
-   simulated contact and single-point lines by the interval score
-   (:func:`fit_widening`), so that a line the probe finds half-way to a multi-asperity
-   contact gets the interval such lines need, and a line it finds single-point keeps
-   its own. The interval of eta is left alone (checks 5 and 6 read it).
+   is far from what the line's sawtooth would say.
 
 Out of domain, the numbers stay, but the intervals are widened (:func:`widen_rows`):
 every half-width ``*_lo68/_hi68/_lo95/_hi95`` about the estimate and every ``*_std``
@@ -115,7 +109,7 @@ from threadpoolctl import ThreadpoolController
 
 import stickslip.estimators.segmentation as sg
 from stickslip.compiled import chunk_bounds, made_up_line, run_chunks
-from stickslip.estimators.calibration import Z68, interval_score, lognormal_std
+from stickslip.estimators.calibration import Z68, lognormal_std
 from stickslip.estimators.table import BOUNDS, OK, TARGETS, TWO_REGIMES, VOLT_NAMES, is_missing
 from stickslip.robust import mad_sigma, median, percentile, select_tails, white_sigma
 
@@ -452,36 +446,29 @@ def widen_rows(rows: Sequence[MutableMapping[str, Any]], factor: float = WIDEN_F
         return
     model_sd = _column(rows, "F_model_std_nN")  # the pairs' std (estimators.pairs)
     _put(rows, "F_model_std_nN", factor * model_sd, np.isfinite(model_sd))
-    for k in WIDENED:
-        widen_column(rows, k, np.full(len(rows), float(factor)))
-
-
-def widen_column(rows: Sequence[MutableMapping[str, Any]], key: str, factor: np.ndarray
-                 ) -> None:  # fmt: skip
-    """Widen one estimate's intervals and std, row ``j`` by ``factor[j]``, as
-    :func:`widen_row` does (in place; rows without the estimate are left alone)."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        m = _column(rows, key)
-        has = np.isfinite(m)
-        if not has.any():
-            return
-        log = (key not in LINEAR_TARGETS) & (m > 0)
-        bounds = {}
-        for b in BOUNDS:
-            v = _column(rows, f"{key}_{b}")
-            ok = has & np.isfinite(v)
-            new = np.where(log, m * (v / m) ** factor, m + factor * (v - m))
-            # a log-normal bound at or below 0 cannot be widened in log space
-            put = ok & ~(log & ~(v > 0))
-            _put(rows, f"{key}_{b}", new, put)
-            bounds[b] = np.where(put, new, v)  # what the row now holds
-        sd = _column(rows, f"{key}_std")
-        ok = has & np.isfinite(sd)
-        lo, hi = bounds["lo68"], bounds["hi68"]
-        from68 = log & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
-        e = np.log(hi / lo) / (2.0 * Z68)
-        lognormal = lognormal_std(m, e)
-        _put(rows, f"{key}_std", np.where(from68, lognormal, factor * sd), ok)
+        for k in WIDENED:
+            m = _column(rows, k)
+            has = np.isfinite(m)
+            if not has.any():
+                continue
+            log = (k not in LINEAR_TARGETS) & (m > 0)
+            bounds = {}
+            for b in BOUNDS:
+                v = _column(rows, f"{k}_{b}")
+                ok = has & np.isfinite(v)
+                new = np.where(log, m * (v / m) ** factor, m + factor * (v - m))
+                # a log-normal bound at or below 0 cannot be widened in log space
+                put = ok & ~(log & ~(v > 0))
+                _put(rows, f"{k}_{b}", new, put)
+                bounds[b] = np.where(put, new, v)  # what the row now holds
+            sd = _column(rows, f"{k}_std")
+            ok = has & np.isfinite(sd)
+            lo, hi = bounds["lo68"], bounds["hi68"]
+            from68 = log & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
+            e = np.log(hi / lo) / (2.0 * Z68)
+            lognormal = lognormal_std(m, e)
+            _put(rows, f"{k}_std", np.where(from68, lognormal, factor * sd), ok)
 
 
 def _locate_refused_changes(rows: Sequence[MutableMapping[str, Any]],
@@ -590,82 +577,6 @@ def _joined(features: np.ndarray) -> np.ndarray:
     return feats.transpose(1, 0, 2).reshape(feats.shape[1], -1)
 
 
-#: Estimates whose intervals in domain widen with the contact probe's odds
-#: (:meth:`ContactProbe.widening`): those the effective PT of a contact defines.
-PROBE_WIDENED = ("U0_eV", "K_N_m")
-#: The widening is fitted in this many bins of the probe's log-odds, of equal weight.
-PROBE_WIDEN_BINS = 8
-#: The largest widening the fit may choose.
-PROBE_WIDEN_MAX = 10.0
-
-
-def _best_factor(lo: np.ndarray, hi: np.ndarray, truth: np.ndarray, weights: np.ndarray,
-                 factors: np.ndarray) -> float:  # fmt: skip
-    """The factor among ``factors`` whose widened log-space 95 % intervals (``lo, hi``:
-    log bounds about 0, the estimate) have the least weighted mean interval score for
-    the log truths ``truth``."""
-    score = [np.sum(weights * interval_score(truth, f * lo, f * hi, 0.05)) for f in factors]
-    return float(factors[int(np.argmin(score))])
-
-
-def fit_widening(log_ratio: np.ndarray, estimate: np.ndarray, lo95: np.ndarray,
-                 hi95: np.ndarray, truth: np.ndarray, weights: np.ndarray,
-                 bins: int = PROBE_WIDEN_BINS) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """How much lines' log-normal 95 % intervals must widen, as a non-decreasing function
-    of the contact probe's log-odds over its limit.
-
-    Parameters
-    ----------
-    log_ratio : ndarray (N,)
-        The lines' log ``domain_contacts`` (in domain: at most 0).
-    estimate, lo95, hi95, truth : ndarray (N,)
-        An estimate, its 95 % interval and the truth (all positive).
-    weights : ndarray (N,)
-    bins : int
-        Bins of the log-odds, of equal weight.
-
-    Returns
-    -------
-    knots, factors : ndarray (bins,)
-        The bins' weighted median log-odds, and the factor (1 to
-        :data:`PROBE_WIDEN_MAX`) by which the intervals widen there in log space: in each
-        bin the one of least weighted mean interval score (a proper score: it asks for
-        95 % coverage, with intervals no wider than that needs), adjacent bins pooled
-        until the factor never falls as the odds grow.
-    """
-    x = np.asarray(log_ratio, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        m = np.log(estimate)
-        lo, hi, t = np.log(lo95) - m, np.log(hi95) - m, np.log(truth) - m
-    ok = np.isfinite(x) & np.isfinite(lo) & np.isfinite(hi) & np.isfinite(t)
-    x, lo, hi, t, w = x[ok], lo[ok], hi[ok], t[ok], np.asarray(weights, float)[ok]
-    order = np.argsort(x, kind="stable")
-    cum = np.cumsum(w[order]) / w.sum()
-    which = np.empty(x.size, int)
-    which[order] = np.minimum((cum * bins - 1e-12).astype(int), bins - 1)
-    grid = np.exp(np.linspace(0.0, np.log(PROBE_WIDEN_MAX), 241))
-
-    def best(members: list[int]) -> float:
-        sel = np.isin(which, members)
-        return _best_factor(lo[sel], hi[sel], t[sel], w[sel], grid)
-
-    blocks: list[tuple[list[int], float]] = []  # pool adjacent violators
-    for b in range(bins):
-        blocks.append(([b], best([b])))
-        while len(blocks) > 1 and blocks[-2][1] > blocks[-1][1]:
-            merged = blocks[-2][0] + blocks[-1][0]
-            blocks[-2:] = [(merged, best(merged))]
-    factors = np.concatenate([np.full(len(bs), f) for bs, f in blocks])
-    knots = np.array([_weighted_median(x[which == b], w[which == b]) for b in range(bins)])
-    return knots, factors
-
-
-def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
-    order = np.argsort(x, kind="stable")
-    cum = np.cumsum(w[order])
-    return float(x[order][np.searchsorted(cum, 0.5 * cum[-1])])
-
-
 @dataclass
 class ContactProbe:
     """The log-odds that a line comes from a contact of several asperities that no
@@ -691,12 +602,6 @@ class ContactProbe:
     level : float
     penalty : float
         The L2 penalty the fit chose.
-    widen_at : ndarray (B,)
-        Log-odds over :attr:`limit` at which the widening of in-domain intervals is
-        given (:meth:`widening`; empty: none).
-    widen_by : ndarray (len(PROBE_WIDENED), B)
-        The factor there, per estimate of :data:`PROBE_WIDENED`
-        (:func:`fit_widening`).
     """
 
     mean: np.ndarray
@@ -706,8 +611,6 @@ class ContactProbe:
     limit: float
     level: float
     penalty: float
-    widen_at: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    widen_by: np.ndarray = field(default_factory=lambda: np.ones((len(PROBE_WIDENED), 0)))
 
     @classmethod
     def fit(cls, features: np.ndarray, labels: np.ndarray, weights: np.ndarray,
@@ -743,28 +646,9 @@ class ContactProbe:
         """The odds over the odds at :attr:`limit` (above 1: flagged), capped at e^50."""
         return np.exp(np.minimum(self.log_odds(features) - self.limit, 50.0))
 
-    def widening(self, ratio: np.ndarray) -> dict[str, np.ndarray]:
-        """Per estimate of :data:`PROBE_WIDENED`, the factor by which the intervals of
-        rows of these ``domain_contacts`` widen: read off :attr:`widen_by` at the log
-        ratio (flat beyond the knots :attr:`widen_at`); 1 above the limit (such a row is
-        out of domain and widened as one) and where no widening was fitted."""
-        r = np.asarray(ratio, float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = np.log(r)
-        use = np.isfinite(x) & (x <= 0.0)
-        out = {}
-        for k, by in zip(PROBE_WIDENED, self.widen_by, strict=True):
-            f = np.ones(r.size)
-            if self.widen_at.size:
-                f[use] = np.interp(x[use], self.widen_at, by)
-            out[k] = f
-        return out
-
     def arrays(self) -> dict[str, np.ndarray]:
         """The probe as arrays (``probe_*``), for :meth:`EmbeddingReference.save`."""
-        return {"probe_widen_at": self.widen_at.astype(np.float64),
-                "probe_widen_by": self.widen_by.astype(np.float64),
-                "probe_mean": self.mean.astype(np.float32),
+        return {"probe_mean": self.mean.astype(np.float32),
                 "probe_scale": self.scale.astype(np.float32),
                 "probe_weights": self.weights.astype(np.float32),
                 "probe_bias": np.float64(self.bias), "probe_limit": np.float64(self.limit),
@@ -776,14 +660,9 @@ class ContactProbe:
         """The probe saved by :meth:`arrays` (None where the file has none)."""
         if "probe_weights" not in z:
             return None
-        probe = cls(z["probe_mean"].astype(float), z["probe_scale"].astype(float),
-                    z["probe_weights"].astype(float), float(z["probe_bias"]),
-                    float(z["probe_limit"]), float(z["probe_level"]),
-                    float(z["probe_penalty"]))  # fmt: skip
-        if "probe_widen_at" in z:
-            probe.widen_at = z["probe_widen_at"].astype(float)
-            probe.widen_by = z["probe_widen_by"].astype(float)
-        return probe
+        return cls(z["probe_mean"].astype(float), z["probe_scale"].astype(float),
+                   z["probe_weights"].astype(float), float(z["probe_bias"]),
+                   float(z["probe_limit"]), float(z["probe_level"]), float(z["probe_penalty"]))
 
 
 @dataclass

@@ -165,12 +165,6 @@ class LineEstimator(TraceEstimator):
             if pred.local_evidence is not None:
                 row[LOCAL_COLUMN] = float(pred.local_evidence[j])
             out[i] = row
-        if probe is not None and ref.probe.widen_at.size:
-            # the probe's odds widen U0's and K's intervals: a line near its limit may be
-            # a contact whose effective PT the model does not read
-            done = [out[i] for i in ok]
-            for key, factor in ref.probe.widening(probe).items():
-                domain.widen_column(done, key, factor)  # type: ignore[arg-type]
         if self.domain_verdict:
             self._check_stick_slip(traces, conditions, out)
         return out, notes
