@@ -288,8 +288,8 @@ def probe_settings(j: int) -> PhysicalSettings:
 def probe_contacts(work: Path) -> list[dict[str, np.ndarray]]:
     """The probe's multi-asperity sets (simulated once, cached under ``work``): per set
     ``x_nm``, ``force_nN`` (Langevin, at the set's temperature), ``misfit``, ``U0_eV`` and
-    ``K_N_m`` (of the effective PT fit to the T = 0 waveform) and the set's lattice, velocity and
-    temperature."""
+    ``K_N_m`` (of the effective PT fit to the T = 0 waveform) and the set's lattice,
+    velocity and temperature."""
     from stickslip.simulators.contacts import contact_set
 
     def make(j: int) -> dict[str, np.ndarray]:
