@@ -47,7 +47,9 @@ The fit
        :data:`WINDOW` blocks shows several cycles, most of whose falls stand clear of
        the noise (twice the hysteresis), then coarsened to about
        :data:`BLOCKS_PER_CYCLE` blocks per cycle. PELT runs on overlapping windows of
-       :data:`WINDOW` blocks, so its cost stays linear in the line's length.
+       :data:`WINDOW` blocks, so its cost stays linear in the line's length. A block
+       mean hides a spike in a level, so a line cut into blocks loses its one-sample
+       spikes first (:func:`despike`).
 
 Nothing here carries a scale in samples, nm or seconds: the noise sets the penalty,
 the cycles set the resolution, and the ratios of the regime test are pure numbers.
@@ -73,6 +75,9 @@ STICK_RATIO = 2.5
 MAX_BASELINE_DEGREE = 5
 #: Passes of the noise level from the fit's own residuals (step 1).
 MAX_NOISE_ITERATIONS = 4
+#: A sample that stands off its neighbours' mean by more than this many of that
+#: difference's standard deviations (and by more than they differ) is a spike.
+SPIKE_SIGMAS = 4.0
 #: Segment price in units of ln(n): start, level and slope (BIC).
 PARAMS_PER_SEGMENT = 3.0
 
@@ -415,6 +420,26 @@ def quantum_sigma(F: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def despike(F: np.ndarray, sigma: float) -> np.ndarray:
+    """``F`` with its isolated one-sample spikes replaced by their neighbours' mean.
+
+    A sample is a spike where it stands off the mean of its two neighbours by more
+    than :data:`SPIKE_SIGMAS` times that difference's noise (``sqrt(3/2) sigma``) and by
+    more than the two neighbours differ from each other. A slip has neighbours on
+    either side of it that differ by the drop, and a stick's samples lie on a line
+    through their neighbours, so neither is touched, whatever the scale of the line.
+    """
+    out = F.copy()
+    cut = SPIKE_SIGMAS * np.sqrt(1.5) * sigma
+    for i in range(1, F.size - 1):
+        mid = 0.5 * (F[i - 1] + F[i + 1])
+        dev = abs(F[i] - mid)
+        if dev > cut and dev > abs(F[i + 1] - F[i - 1]):
+            out[i] = mid
+    return out
+
+
+@njit(cache=True, error_model="numpy")
 def choose_block(F: np.ndarray) -> int:
     """Samples per block for the segmentation of ``F`` (1 for lines up to a window)."""
     n = F.size
@@ -496,7 +521,16 @@ def find_cycles(F: np.ndarray, white: float = -1.0) -> tuple[np.ndarray, int, fl
         out[0, CY_LO], out[0, CY_HI], out[0, CY_PEAK] = 0, max(n - 1, 0), -1
         out[0, CY_SLOPE_LO], out[0, CY_SLOPE_HI] = 0, max(n - 1, 0)
         return out, 1, 0.0
-    b = choose_block(F)
+    b = 1
+    if n > WINDOW:
+        # a block mean hides a spike in a level that the polyline cannot tell from a
+        # step, so a line cut into blocks loses its spikes first (at one sample per
+        # block the polyline drops them itself: step 1)
+        w = white if white >= 0 else white_sigma(F)
+        clean = despike(F, max(w, quantum_sigma(F)))
+        b = choose_block(clean)
+        if b > 1:
+            F = clean
     y = _block_means(F, b) if b > 1 else F.copy()
     nb = y.size
     # start from below: the second differences count the slips of a coarse line as
