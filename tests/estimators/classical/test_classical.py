@@ -9,10 +9,15 @@ import pytest
 
 from stickslip.estimators.classical import analyse_trace, estimate_array, estimate_trace
 from stickslip.estimators.classical import estimator as E
-from stickslip.estimators.classical.pt_inversion import expected_peak, k_from_segment
+from stickslip.estimators.classical.pt_inversion import (
+    _saddle,
+    expected_peak,
+    k_from_segment,
+    thermal_force,
+)
 from stickslip.simulators.config import PhysicalSettings
 from stickslip.simulators.simulate import simulate
-from stickslip.units import eta_from, fmax_nN
+from stickslip.units import EV_TO_NN_NM, KB_NN_NM_PER_K, eta_from, fmax_nN
 
 SHARED_DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
 MACRO = SHARED_DATA / "macro-stickslip" / "k1002Nm_v42.mat"
@@ -54,6 +59,54 @@ def test_thermal_peak_lowers_with_temperature():
     assert np.all(np.diff(peaks) < 0) and peaks[0] < Fmax
     # faster scans leave less time for activation: the peak rises with velocity
     assert expected_peak(Fmax, K, 0.0, A, 296, 6000.0, 1e-12, 1e7) > peaks[2]
+
+
+def test_thermal_force_has_the_zero_temperature_limit():
+    eta = 5.0
+    th_c = np.arccos(-1.0 / eta)
+    for th in (-0.5, 0.3, 1.0, 1.5):
+        thb = _saddle(th, eta, th_c, np.nan)
+        assert thermal_force(th, thb, eta, 1e9) == pytest.approx(np.sin(th), abs=1e-6)
+    # kT comparable with the barrier: the forward side of the well is the softer, so
+    # the tip sits ahead of its minimum and the spring pulls less
+    assert thermal_force(1.2, _saddle(1.2, eta, th_c, np.nan), eta, 20.0) < np.sin(1.2) - 0.01
+
+
+def test_thermal_force_is_the_simulated_mean_force():
+    # the Langevin simulator's instantaneous force, averaged at fixed support phase,
+    # against the Boltzmann mean over the well: a stiff contact at eta 1.7, where the
+    # mean force falls 4-7 % below the T = 0 branch near the slips
+    U0, K = 0.6, 18.0
+    r = simulate(np.full(3, U0), np.full(3, K), PhysicalSettings(), seed=11,
+                 samples_per_pixel=32)  # fmt: skip
+    Fmax = float(fmax_nN(U0, A))
+    eta = float(eta_from(U0, K, A))
+    th_c = np.arccos(-1.0 / eta)
+    X = np.asarray(r.fine_support_nm).ravel()
+    tip = np.asarray(r.fine_x_nm).ravel()
+    F = np.asarray(r.fine_force_nN).ravel()
+    # each sample's T = 0 phase of the well the tip is in: th + eta sin(th) = 2 pi X/a
+    phase = 2 * np.pi * (X / A - np.round(tip / A))
+    grid = np.linspace(-th_c, th_c, 4001)
+    inside = np.abs(phase) < th_c + eta * np.sin(th_c)
+    th = np.interp(phase[inside], grid + eta * np.sin(grid), grid)
+    u_kT = U0 * EV_TO_NN_NM / (KB_NN_NM_PER_K * 296.0)
+    for t0 in (0.9, 1.1, 1.2, 1.3):
+        near = np.abs(th - t0) < 0.02
+        mean = F[inside][near].mean() / Fmax
+        model = thermal_force(t0, _saddle(t0, eta, th_c, np.nan), eta, u_kT)
+        assert mean == pytest.approx(model, abs=0.012)
+        if t0 >= 1.1:
+            assert np.sin(t0) - mean > 0.02  # the T = 0 branch is measurably off
+
+
+def test_stiff_contacts_at_296K_read_the_thermal_peak():
+    # eta 1.6-1.9 at 296 K: the peak read off the T = 0 branch put U0 10-14 % low and
+    # K 8-13 % high; with the thermal mean force both are within 8 %
+    U = np.array([0.6, 0.9, 1.2, 1.5])
+    K = np.array([18.0, 28.0, 36.0, 42.0])
+    dU, dK = _rel_errors(U, K, 296.0, seed=5)
+    assert np.median(dU) < 0.08 and np.median(dK) < 0.08
 
 
 def test_zero_temperature_traces_invert_within_2_percent():

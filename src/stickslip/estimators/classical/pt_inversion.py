@@ -22,11 +22,18 @@ Thermal activation (finite T)
     ``r = (w_min/2 pi) (sqrt(Gamma^2/4 + w_b^2) - Gamma/2)/w_b exp(-dE/kT)``,
     ``w_min^2 = K (1 + eta cos th)/m``, ``w_b^2 = -K (1 + eta cos th_b)/m``, and the
     branch is swept at ``dt = (a/2 pi)(1 + eta cos th)/v dth``. Integrating the hazard
-    from the landing point gives the distribution of the slip point and so the expected
-    peak ``E[F_max sin(min(th_slip, pi/2))]``. F_max is the value for which this
-    expectation equals the measured mean peak (fixed-point iteration; K is re-derived
-    from the slopes at each step). T, v and a are the user's; m and Gamma default to the
-    paper preset and enter only through the logarithmic prefactor.
+    from the landing point gives the distribution of the slip point. Between slips the
+    tip fluctuates in its well far faster than a pixel lasts, so the recorded force is
+    the well's Boltzmann mean (:func:`thermal_force`), not the T = 0 branch
+    ``F_max sin(th)``: where the well is shallow against kT (a stiff contact, eta below
+    about 3, a low barrier) its softer forward side holds the tip ahead of the minimum
+    and the mean force falls several per cent below the branch near the slips. The
+    expected peak is the highest mean force up to the slip point, averaged over the slip
+    points (it is ``E[F_max sin(min(th_slip, pi/2))]`` as kT goes to 0). F_max is the
+    value for which this expectation equals the measured mean peak (fixed-point
+    iteration; K is re-derived from the slopes at each step). T, v and a are the
+    user's; m and Gamma default to the paper preset and enter only through the
+    logarithmic prefactor.
 
 Pixel averaging
     Handled on the measurement side (:mod:`stickslip.estimators.classical.slips`): the slip force
@@ -45,6 +52,9 @@ from stickslip.units import EV_TO_NN_NM, KB_NN_NM_PER_K
 
 N_GRID = 160  # branch points of the thermal model
 MAX_ITER = 12
+N_WELL = 16  # quadrature points across the tip's well (the thermal mean force)
+SLIP_SHARE_MIN = 1e-12  # shares of the sticks slipping below this add nothing to the mean peak
+WELL_SIGMAS = 8.0  # half-width of that quadrature, in the well's thermal spreads
 
 
 @njit(cache=True, error_model="numpy")
@@ -93,6 +103,42 @@ def _saddle(th: float, eta: float, th_c: float, guess: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def thermal_force(th: float, thb: float, eta: float, u_kT: float) -> float:
+    """Mean lateral force over ``F_max`` of a tip in equilibrium in its well.
+
+    The tip's T = 0 minimum is at phase ``th`` (support at ``X = (a/2 pi)(th + eta sin
+    th)``); it fluctuates in the energy ``U0 [-cos(phi)/2 + (th - phi + eta sin th)^2/
+    (4 eta)]`` with Boltzmann weight ``exp(-U0 E/kT)`` (``u_kT = U0/kT``), up to the saddle
+    ``thb`` ahead (NaN: none). A pixel averages many such fluctuations, so the recorded
+    force is this mean, ``sin(th) - <phi - th>/eta``; the well's forward side softens
+    as the slip nears, so the mean falls below ``sin(th)`` where the well is shallow
+    against kT (low eta, low U0).
+    """
+    c = 1.0 + eta * np.cos(th)  # the well's curvature, in units of U0/(2 eta)
+    st = np.sin(th)
+    if not (c > 0 and u_kT > 0):
+        return st
+    spread = np.sqrt(2.0 * eta / (u_kT * c))
+    lo = max(th - WELL_SIGMAS * spread, -np.arccos(-1.0 / eta) if eta > 1.0 else -np.pi)
+    hi = th + WELL_SIGMAS * spread
+    if thb < hi:  # NaN compares false: no saddle, no cut
+        hi = thb
+    if not hi > lo:
+        return st
+    base = eta * st
+    e0 = -0.5 * np.cos(th) + base * base / (4.0 * eta)
+    sw = 0.0
+    sm = 0.0
+    for j in range(N_WELL):
+        phi = lo + (hi - lo) * (j + 0.5) / N_WELL
+        d = th - phi + base
+        w = np.exp(-u_kT * (-0.5 * np.cos(phi) + d * d / (4.0 * eta) - e0))
+        sw += w
+        sm += w * (phi - th)
+    return st - sm / (sw * eta) if sw > 0 else st
+
+
+@njit(cache=True, error_model="numpy")
 def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v: float,
                   mass_kg: float, gamma: float) -> float:  # fmt: skip
     """Mean peak force (nN) of a stick phase at temperature T (see module docstring).
@@ -118,12 +164,19 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
     th_c = np.arccos(-1.0 / eta)
     th_lo = min(theta_lo, th_c - 1e-6)
     w2 = K / mass_kg  # K/m in 1/s^2
+    u_kT = U0 / kT
+    ths = np.empty(N_GRID)
+    thbs = np.empty(N_GRID)
+    # the mean force at each grid point, over F_max, evaluated only where it is needed:
+    # where sticks slip, and back from there to the branch's highest point before
+    tops = np.full(N_GRID, np.nan)
     S_prev = 1.0
     H = 0.0
     total = 0.0
     rate_dt_prev = 0.0
     th_prev = th_lo
     thb = np.nan
+    top = -np.inf  # the highest mean force along the stick so far
     for j in range(N_GRID):
         u = j / (N_GRID - 1.0)
         # points crowd towards th_c, where the barrier vanishes
@@ -131,6 +184,8 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
         rate_dt = 0.0
         lin = 1.0 + eta * np.cos(th)
         thb = _saddle(th, eta, th_c, thb) if j < N_GRID - 1 else np.nan
+        ths[j] = th
+        thbs[j] = thb
         if lin > 0 and not np.isnan(thb):
             e = -0.5 * (np.cos(thb) - np.cos(th)) + (
                 (thb - th - eta * np.sin(th)) ** 2 - (eta * np.sin(th)) ** 2
@@ -144,17 +199,44 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
         if j > 0:
             H += 0.5 * (rate_dt + rate_dt_prev) * (th - th_prev)
             S = np.exp(-H)
-            mid = 0.5 * (th + th_prev)
-            total += (S_prev - S) * Fmax * np.sin(min(mid, 0.5 * np.pi))
+            if S_prev - S > SLIP_SHARE_MIN:
+                if top == -np.inf:  # the first slips: the stick's top so far
+                    top = _top_before(j, ths, thbs, tops, eta, u_kT)
+                tops[j] = thermal_force(th, thb, eta, u_kT)
+                top = max(top, tops[j])
+                total += (S_prev - S) * Fmax * top
             S_prev = S
-            if S == 0.0:
-                # every stick has slipped (the survival underflowed): the points left
-                # add exactly zero, so stopping here changes no bit of the result
+            if S < SLIP_SHARE_MIN:
+                # every stick has slipped but a share below SLIP_SHARE_MIN, whose peaks
+                # would change the mean by less than that share of F_max
                 return total
         rate_dt_prev = rate_dt
         th_prev = th
-    # whatever survives slips at th_c > pi/2: its peak is F_max
-    return total + S_prev * Fmax
+    # whatever survives slips at th_c > pi/2, past the branch's top: its peak is the
+    # highest mean force along the whole branch
+    for j in range(N_GRID):
+        if np.isnan(tops[j]):
+            tops[j] = thermal_force(ths[j], thbs[j], eta, u_kT)
+        top = max(top, tops[j])
+    return total + S_prev * Fmax * top
+
+
+@njit(cache=True, error_model="numpy")
+def _top_before(j: int, ths: np.ndarray, thbs: np.ndarray, tops: np.ndarray, eta: float,
+                u_kT: float) -> float:  # fmt: skip
+    """The highest mean force of the grid points before ``j`` (filling ``tops``), read
+    backwards from ``j - 1`` for as long as it rises: the branch's mean force has one
+    maximum, so where it falls backwards the points further back are lower still."""
+    k = j - 1
+    tops[k] = thermal_force(ths[k], thbs[k], eta, u_kT)
+    best = tops[k]
+    while k > 0:
+        tops[k - 1] = thermal_force(ths[k - 1], thbs[k - 1], eta, u_kT)
+        if tops[k - 1] <= tops[k]:
+            break
+        best = max(best, tops[k - 1])
+        k -= 1
+    return best
 
 
 @njit(cache=True, error_model="numpy")
