@@ -101,8 +101,8 @@ def test_thermal_force_is_the_simulated_mean_force():
 
 
 def test_stiff_contacts_at_296K_read_the_thermal_peak():
-    # eta 1.6-1.9 at 296 K: the peak read off the T = 0 branch put U0 10-14 % low and
-    # K 8-13 % high; with the thermal mean force both are within 8 %
+    # eta 1.6-1.9 at 296 K: the peak read off the T = 0 branch put U0 9-14 % low and
+    # K 7-13 % high; with the thermal mean force both are within 8 %
     U = np.array([0.6, 0.9, 1.2, 1.5])
     K = np.array([18.0, 28.0, 36.0, 42.0])
     dU, dK = _rel_errors(U, K, 296.0, seed=5)
