@@ -105,6 +105,14 @@ def _saddle(th: float, eta: float, th_c: float, guess: float) -> float:
     return t
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _energy(phi: float, th: float, eta: float) -> float:
+    """Energy over U0 of a tip at phase ``phi`` while the support holds the T = 0 minimum
+    at ``th``: ``-cos(phi)/2 + (th - phi + eta sin th)^2/(4 eta)``."""
+    d = th - phi + eta * np.sin(th)
+    return -0.5 * np.cos(phi) + d * d / (4.0 * eta)
+
+
 @njit(cache=True, error_model="numpy")
 def thermal_force(th: float, thb: float, eta: float, u_kT: float) -> float:
     """Mean lateral force over ``F_max`` of a tip in equilibrium in its well.
@@ -128,14 +136,12 @@ def thermal_force(th: float, thb: float, eta: float, u_kT: float) -> float:
         hi = thb
     if not hi > lo:
         return st
-    base = eta * st
-    e0 = -0.5 * np.cos(th) + base * base / (4.0 * eta)
+    e0 = _energy(th, th, eta)
     sw = 0.0
     sm = 0.0
     for j in range(N_WELL):
         phi = lo + (hi - lo) * (j + 0.5) / N_WELL
-        d = th - phi + base
-        w = np.exp(-u_kT * (-0.5 * np.cos(phi) + d * d / (4.0 * eta) - e0))
+        w = np.exp(-u_kT * (_energy(phi, th, eta) - e0))
         sw += w
         sm += w * (phi - th)
     return st - sm / (sw * eta) if sw > 0 else st
@@ -190,9 +196,7 @@ def expected_peak(Fmax: float, K: float, theta_lo: float, a: float, T: float, v:
         ths[j] = th
         thbs[j] = thb
         if lin > 0 and not np.isnan(thb):
-            e = -0.5 * (np.cos(thb) - np.cos(th)) + (
-                (thb - th - eta * np.sin(th)) ** 2 - (eta * np.sin(th)) ** 2
-            ) / (4.0 * eta)
+            e = _energy(thb, th, eta) - _energy(th, th, eta)
             wmin = np.sqrt(w2 * lin)
             wb = np.sqrt(max(-w2 * (1.0 + eta * np.cos(thb)), 1e-30))
             kgh = (np.sqrt(0.25 * gamma * gamma + wb * wb) - 0.5 * gamma) / wb
