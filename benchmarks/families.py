@@ -28,10 +28,12 @@ How the sets are made (independently of training and of each other):
 
 Calibrations compared:
 
-- ``shipped``: the model's calibration as loaded (for the bundled model: fitted on
-  draws of the older detector effects its members were trained with);
+- ``shipped``: the model's calibration as loaded (for the bundled model: the
+  ``families`` calibration below, written with ``--write``);
 - ``families``: :func:`stickslip.estimators.line.families.calibrate_on_families` on the
-  calibration lines, every family in the prior;
+  calibration lines, every family in the prior (``--calibrate-on f ...``: only those
+  families; ``--calibrate-on`` with none: no family, the members' training effects
+  alone, a careful measurement's prior);
 - ``LOFO``: the same without family f (:meth:`NuisancePrior.without`), scored on
   ``with f``: an effect the calibration never saw.
 
@@ -55,6 +57,7 @@ seed moved by 1000 (S - 601): a second evaluation independent of the first. ``--
 Usage: python benchmarks/families.py [--work build/families] [--n-cal 600] [--n-eval 400]
        [--draws 4] [--n-bench 120] [--line-model PATH] [--no-lofo] [--write PATH]
        [--threads 2] [--eval-seed 601] [--only FAMILY ...] [--no-pairs]
+       [--calibrate-on [FAMILY ...]]
 """
 
 from __future__ import annotations
@@ -238,6 +241,11 @@ def main() -> None:
     ap.add_argument("--only", nargs="+", choices=fx.FAMILIES, default=None,
                     help="the 'with f' sets and leave-one-family-out for these families only")
     ap.add_argument("--no-pairs", action="store_true", help="skip the trace/retrace pairs")
+    ap.add_argument("--calibrate-on", nargs="*", choices=fx.FAMILIES, default=None,
+                    metavar="FAMILY",
+                    help="the families the calibration's prior holds (default: every one; "
+                         "none named: no family, so that the members' training effects "
+                         "alone size the intervals)")  # fmt: skip
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     # evaluation draws: the documented seeds for the documented pool, others beside them
@@ -279,7 +287,9 @@ def main() -> None:
     for label, ens in (("shipped", shipped), ("families", None)):
         if ens is None:
             ens = copy.deepcopy(shipped)
-            settings = FamilyCalibration(draws=args.draws, training_draws=args.training_draws,
+            cal_prior = prior if args.calibrate_on is None else prior.only(*args.calibrate_on)
+            settings = FamilyCalibration(prior=cal_prior, draws=args.draws,
+                                         training_draws=args.training_draws,
                                          contacts=args.contacts)  # fmt: skip
             report = calibrate_on_families(ens, cal_pool, settings, contacts)
             families_ens, families_report = ens, report
