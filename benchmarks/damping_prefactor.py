@@ -18,9 +18,14 @@ the inversion told each assumed damping (0.1x, 1x and 10x the preset) and the tr
 one; and the line model's (bundled, or ``--model PATH``), which integrates over the
 damping its training drew (0.1-10x). Nothing is fitted here.
 
-A velocity series tells the two apart: the athermal friction ``F_c = pi U0 / a`` of the
-thermally activated PT law does not depend on the prefactor
-(:mod:`stickslip.diagnostics.velocity`).
+A velocity series can tell the two apart where it reaches the knee of the thermally
+activated PT law: its athermal friction ``F_c = pi U0 / a`` does not depend on the
+prefactor, which sets the critical velocity ``v_c`` (:mod:`stickslip.diagnostics.velocity`).
+The second table fits that law (:func:`~stickslip.diagnostics.velocity.fit_thermal_law`)
+to the classical estimator's mean peak force of 32 short lines (2 nm as 96 px, the
+paper's pixel) at each of 10-320 nm/s, for two contacts at 1x and 10x the preset's
+damping (simulator seeds 7601-7604, used by nothing else), and prints ``F_c`` over the
+true ``F_max`` with its profile 68 % interval, and ``v_c``.
 
 Usage: python benchmarks/damping_prefactor.py [--model PATH] [--seed-shift N]
        [--cache DIR]
@@ -36,13 +41,24 @@ import numpy as np
 from _machine import machine_line
 from acquisition import Draw, cached_set, predict_set, set_specs
 
+from stickslip.diagnostics.velocity import fit_thermal_law
 from stickslip.estimators.classical import estimator as classical
 from stickslip.estimators.load import load_estimator
+from stickslip.simulators.config import PhysicalSettings
+from stickslip.simulators.simulate import simulate
+from stickslip.units import EV_TO_NN_NM
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESET_DAMPING_PER_S = classical.PAPER_DAMPING_PER_S
 #: the damping the inversion is told, as factors of the preset's (None: the true one)
 ASSUMED = (0.1, 1.0, 10.0, None)
+#: the velocity series: velocities (nm/s), lines per velocity, contacts (U0 eV, K N/m),
+#: damping factors and the simulator's first seed
+SERIES_VELOCITIES = (10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
+SERIES_LINES = 32
+SERIES_CONTACTS = ((1.0, 10.0), (2.0, 20.0))
+SERIES_DAMPING = (1.0, 10.0)
+SERIES_SEED = 7601
 
 
 def log_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float, float]:
@@ -53,6 +69,29 @@ def log_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float, f
         return 0.0, float("nan"), float("nan")
     r = np.log(estimate[ok] / truth[ok])
     return float(ok.mean()), float(np.median(r)), float(np.sqrt(np.mean(r * r)))
+
+
+def velocity_series(U0_eV: float, K_N_m: float, damping_factor: float, seed: int,
+                    lattice_nm: float = 0.246, temperature_K: float = 296.0
+                    ) -> tuple[float, float, float, float]:  # fmt: skip
+    """The thermally activated PT law fitted to a simulated velocity series of one contact:
+    ``F_c / F_max`` with its profile 68 % interval, and ``v_c`` (nm/s)."""
+    v = np.repeat(np.asarray(SERIES_VELOCITIES), SERIES_LINES)
+    settings = PhysicalSettings(length_nm=2.0, pixels=96, lattice_nm=lattice_nm,
+                                temperature_K=temperature_K,
+                                damping_per_s=damping_factor * PRESET_DAMPING_PER_S)  # fmt: skip
+    res = simulate(np.full(v.size, U0_eV), np.full(v.size, K_N_m), settings, seed=seed,
+                   velocity_nm_per_s=v)  # fmt: skip
+    peak = classical.estimate_array(res.x_nm, res.force_nN, lattice_nm, temperature_K,
+                                    v)[:, classical.F_PEAK]  # fmt: skip
+    means, sems = [], []
+    for u in SERIES_VELOCITIES:
+        f = peak[(v == u) & np.isfinite(peak)]
+        means.append(f.mean())
+        sems.append(f.std(ddof=1) / np.sqrt(f.size))
+    fit = fit_thermal_law(SERIES_VELOCITIES, means, sems, temperature_K)
+    F_max = np.pi * U0_eV * EV_TO_NN_NM / lattice_nm
+    return fit.F_c_nN / F_max, fit.F_c_lo / F_max, fit.F_c_hi / F_max, float(np.exp(fit.ln_v_c))
 
 
 def main() -> None:
@@ -95,6 +134,16 @@ def main() -> None:
         print(f"  {level / PRESET_DAMPING_PER_S:>12g}x  {m.size:>3d}"
               + "".join(f"  {c:>24s}" for c in cells) + f"  {med:+.3f} / {rms:.3f}")  # fmt: skip
     print("(in brackets: the share of lines the classical estimator answers)")
+    print(f"\nvelocity series ({SERIES_LINES} lines of 2 nm at each of "
+          f"{', '.join(f'{u:g}' for u in SERIES_VELOCITIES)} nm/s, 296 K, graphite): the "
+          f"thermally activated law's F_c over the true F_max")  # fmt: skip
+    seed = SERIES_SEED
+    for U0_eV, K_N_m in SERIES_CONTACTS:
+        for g in SERIES_DAMPING:
+            ratio, lo, hi, v_c = velocity_series(U0_eV, K_N_m, g, seed)
+            print(f"  U0 {U0_eV:g} eV, K {K_N_m:g} N/m, damping {g:g}x (seed {seed}): "
+                  f"F_c / F_max {ratio:.3f}, 68 % {lo:.3f}-{hi:.3f}; v_c {v_c:.3g} nm/s")
+            seed += 1
 
 
 if __name__ == "__main__":
