@@ -23,7 +23,8 @@ activated PT law: its athermal friction ``F_c = pi U0 / a`` does not depend on t
 prefactor, which sets the critical velocity ``v_c`` (:mod:`stickslip.diagnostics.velocity`).
 The second table fits that law (:func:`~stickslip.diagnostics.velocity.fit_thermal_law`)
 to the classical estimator's mean peak force of 32 short lines (2 nm as 96 px, the
-paper's pixel) at each of 10-320 nm/s, for two contacts at 1x and 10x the preset's
+paper's pixel; :func:`~stickslip.diagnostics.velocity.simulated_series`) at each of
+10-320 nm/s, for two contacts at 1x and 10x the preset's
 damping (simulator seeds 7601-7604, used by nothing else), and prints ``F_c`` over the
 true ``F_max`` with its profile 68 % interval, and ``v_c``.
 
@@ -41,11 +42,9 @@ import numpy as np
 from _machine import machine_line
 from acquisition import Draw, cached_set, predict_set, set_specs
 
-from stickslip.diagnostics.velocity import fit_thermal_law
+from stickslip.diagnostics.velocity import fit_thermal_law, group_by_velocity, simulated_series
 from stickslip.estimators.classical import estimator as classical
 from stickslip.estimators.load import load_estimator
-from stickslip.simulators.config import PhysicalSettings
-from stickslip.simulators.simulate import simulate
 from stickslip.units import EV_TO_NN_NM
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,20 +76,11 @@ def velocity_series(U0_eV: float, K_N_m: float, damping_factor: float, seed: int
     """The thermally activated PT law fitted to a simulated velocity series of one contact:
     ``F_c / F_max`` with its profile 68 % interval, and ``v_c`` (nm/s) with the upper end
     of its profile 68 % interval (``inf`` where the series does not bound it)."""
-    v = np.repeat(np.asarray(SERIES_VELOCITIES), SERIES_LINES)
-    settings = PhysicalSettings(length_nm=2.0, pixels=96, lattice_nm=lattice_nm,
-                                temperature_K=temperature_K,
-                                damping_per_s=damping_factor * PRESET_DAMPING_PER_S)  # fmt: skip
-    res = simulate(np.full(v.size, U0_eV), np.full(v.size, K_N_m), settings, seed=seed,
-                   velocity_nm_per_s=v)  # fmt: skip
-    peak = classical.estimate_array(res.x_nm, res.force_nN, lattice_nm, temperature_K,
-                                    v)[:, classical.F_PEAK]  # fmt: skip
-    means, sems = [], []
-    for u in SERIES_VELOCITIES:
-        f = peak[(v == u) & np.isfinite(peak)]
-        means.append(f.mean())
-        sems.append(f.std(ddof=1) / np.sqrt(f.size))
-    fit = fit_thermal_law(SERIES_VELOCITIES, means, sems, temperature_K)
+    s = simulated_series(U0_eV, K_N_m, SERIES_VELOCITIES, lattice_nm=lattice_nm,
+                         temperature_K=temperature_K, lines=SERIES_LINES, seed=seed,
+                         damping_per_s=damping_factor * PRESET_DAMPING_PER_S)  # fmt: skip
+    g = group_by_velocity(s["velocity_nm_per_s"], s["F_peak_nN"])
+    fit = fit_thermal_law(g.velocity_nm_per_s, g.mean, g.sem, temperature_K)
     F_max = np.pi * U0_eV * EV_TO_NN_NM / lattice_nm
     return (fit.F_c_nN / F_max, fit.F_c_lo / F_max, fit.F_c_hi / F_max,
             float(np.exp(fit.ln_v_c)), fit.v_c_hi)

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from stickslip.diagnostics import velocity as vel
+from stickslip.estimators.classical.estimator import U0, estimate_array
 from stickslip.units import fmax_nN
 
 DATA = Path(__file__).parent / "data" / "velocity_series_u1_k3.csv"
@@ -136,3 +137,21 @@ def test_cached_series_is_reproducible():
     old_g, new_g = _groups(s), _groups(new)
     assert np.all(new_g.n_lines >= 24)  # a few lines may be flagged (too noisy, ...)
     assert np.all(np.abs(new_g.mean - old_g.mean) <= 2 * old_g.sem), (new_g.mean, old_g.mean)
+
+
+def test_a_more_damped_contact_slips_later_as_kramers_prefactor_says():
+    """Kramers' prefactor falls as 1/Gamma once a contact is overdamped: at ten times the
+    preset's damping the tip slips at a higher force, which the PT inversion told the
+    preset's damping reads as a higher barrier, and told the true damping does not (the
+    simulator and the inversion's rate theory agree). Same seed at both dampings."""
+    peak, told_preset, told_truth = {}, {}, {}
+    for gamma in (1e7, 1e8):
+        s = vel.simulated_series(1.0, 10.0, [60.0], lines=32, seed=7605, damping_per_s=gamma)
+        peak[gamma] = np.nanmean(s["F_peak_nN"])
+        told_preset[gamma] = np.nanmedian(s["U0_eV"])  # the labels assume the preset
+        told_truth[gamma] = np.nanmedian(estimate_array(
+            s["x_nm"], s["force_nN"], A, 296.0, s["velocity_nm_per_s"],
+            damping_per_s=gamma)[:, U0])  # fmt: skip
+    assert peak[1e8] > 1.03 * peak[1e7], peak  # measured +5 %
+    assert told_preset[1e8] > 1.04, told_preset  # measured 1.061 eV
+    assert all(abs(u - 1.0) < 0.03 for u in told_truth.values()), told_truth
