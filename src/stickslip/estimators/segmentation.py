@@ -531,6 +531,8 @@ def find_cycles(F: np.ndarray, white: float = -1.0) -> tuple[np.ndarray, int, fl
         b = choose_block(clean)
         if b > 1:
             F = clean
+        else:
+            white = w  # the line is kept as it is: its white noise is read once
     y = _block_means(F, b) if b > 1 else F.copy()
     nb = y.size
     # start from below: the second differences count the slips of a coarse line as
